@@ -1,0 +1,73 @@
+"""Plan-view plot of a generated track layout (:func:`track.layout.build_layout`)."""
+from __future__ import annotations
+
+# Colour per plan-line kind (PlanLine.kind).
+KIND_COLOURS = {"stock": "black", "closure": "tab:blue", "rail": "dimgray", "wing": "tab:orange",
+                "nose": "tab:red", "check": "tab:green"}
+LABEL_EVERY = 5  # sleeper indices are written on every 5th sleeper
+
+
+def plot_layout(layout, ax=None):
+    """Plan view of ``layout``: rails by kind, sleepers, TCP and transition sleeper.
+
+    Parameters
+    ----------
+    layout : track.layout.Layout
+        The generated layout.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw into; a new figure is created when omitted.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure holding ``ax``. x [m] along the through route, y [m] lateral
+        (the lateral scale is exaggerated; the aspect ratio is not equal).
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(14, 4.5))
+    else:
+        fig = ax.figure
+
+    p = layout.params
+    transition = None
+    if layout.x_transition is not None:
+        transition = min(layout.sleepers, key=lambda sl: abs(sl.x - layout.x_transition)).index
+    for sl in layout.sleepers:
+        w = sl.profile.base.width
+        hot = sl.index == transition
+        ax.add_patch(Rectangle((sl.x - w / 2, sl.y_start), w, sl.length,
+                               facecolor="gold" if hot else "0.85",
+                               edgecolor="darkgoldenrod" if hot else "0.6", lw=0.6, zorder=1,
+                               label="transition sleeper" if hot else None))
+        if sl.index % LABEL_EVERY == 0 or hot:
+            ax.text(sl.x, sl.y_start - 0.08, str(sl.index), ha="center", va="top", fontsize=7)
+
+    seen = set()
+    for ln in layout.lines:
+        colour = KIND_COLOURS.get(ln.kind, "purple")
+        ax.plot(ln.x, ln.y, color=colour, lw=1.2, zorder=3,
+                label=None if ln.kind in seen else ln.kind)
+        seen.add(ln.kind)
+
+    for r in layout.rails:  # rail seats (bushing positions) as dots
+        xs = [st.x for st in r.seats]
+        ys = [st.y for st in r.seats]
+        ax.plot(xs, ys, ".", ms=2.5, color=KIND_COLOURS.get(
+            {"crossing": "nose", "check": "check"}.get(r.kind, "rail")), zorder=4)
+
+    if layout.x_tcp is not None:
+        y_tcp = (p.gauge / 2) * (1 if p.hand == "left" else -1)
+        ax.plot([layout.x_tcp], [y_tcp], "x", color="red", ms=9, mew=2, zorder=5, label="TCP")
+
+    ax.set_xlabel("x along the through route [m]")
+    ax.set_ylabel("y lateral [m] (+ left)")
+    title = f"{p.type}"
+    if p.type == "turnout":
+        title += f" {p.crossing} R{p.radius:g} {p.hand} hand, route {p.route}"
+    ax.set_title(title + f", {len(layout.sleepers)} sleepers @ {p.sleeper_spacing:g} m")
+    ax.autoscale_view()
+    ax.legend(loc="upper left", fontsize=7, ncol=4)
+    return fig

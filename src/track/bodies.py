@@ -1,0 +1,146 @@
+"""Finite-element beam bodies (rails along x, sleepers along y).
+
+A :class:`BeamBody` is the full-order model (``fom``) of one rail or sleeper:
+node coordinates, the element data and the assembled sparse ``K`` and ``M``
+with dofs ``[w0, th0, w1, th1, ...]``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .elements import deflection_shape, end_moments, shear_parameter, timoshenko_matrices
+from .params import BeamProfile
+
+DUPLICATE_TOL = 1e-6  # m: mesh points closer than this are one node
+
+
+def mesh_line(length: float, points: np.ndarray, h_max: float) -> np.ndarray:
+    """Nodes on [0, length] that include ``points`` and have spacing <= ``h_max``.
+
+    Parameters
+    ----------
+    length : float
+        Body length [m].
+    points : ndarray, shape (k,)
+        Positions that must be nodes [m] (seats, bushings, sensor points).
+    h_max : float
+        Maximum element length [m].
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Sorted node coordinates, first 0 and last ``length``.
+    """
+    pts = np.concatenate([[0.0, length], np.clip(np.asarray(points, float), 0.0, length)])
+    pts = np.unique(np.round(pts / DUPLICATE_TOL) * DUPLICATE_TOL)
+    nodes = [pts[:1]]
+    for a, b in zip(pts[:-1], pts[1:]):
+        n = max(1, int(np.ceil((b - a) / h_max - 1e-9)))
+        nodes.append(np.linspace(a, b, n + 1)[1:])
+    return np.concatenate(nodes)
+
+
+@dataclass
+class BeamBody:
+    """Full-order FE model of one beam body.
+
+    Attributes
+    ----------
+    name : str
+    s : ndarray, shape (n,)
+        Node coordinates along the body axis [m].
+    profile : BeamProfile
+    K, M : scipy.sparse.csr_matrix, shape (2n, 2n)
+    Ke : ndarray, shape (n-1, 4, 4)
+        Element stiffness matrices (for moment recovery).
+    phi : ndarray, shape (n-1,)
+        Element shear parameters (for the deflection shape functions).
+    """
+
+    name: str
+    s: np.ndarray
+    profile: BeamProfile
+    K: sp.csr_matrix
+    M: sp.csr_matrix
+    Ke: np.ndarray
+    phi: np.ndarray
+
+    @property
+    def ndof(self) -> int:
+        return 2 * self.s.size
+
+    def node(self, s: float) -> int:
+        """Index of the node at coordinate ``s`` [m] (must be a node)."""
+        i = int(np.argmin(np.abs(self.s - s)))
+        if abs(self.s[i] - s) > 1e-5:
+            raise ValueError(f"{self.name}: no node at s = {s:.6f} m")
+        return i
+
+    def shape_row(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Deflection at ``s`` as weights on full dofs.
+
+        Returns
+        -------
+        dofs : ndarray of int, shape (4,)
+        weights : ndarray, shape (4,)
+            ``w(s) = weights @ u[dofs]``.
+        """
+        e = int(np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.s.size - 2))
+        L = self.s[e + 1] - self.s[e]
+        xi = np.clip((s - self.s[e]) / L, 0.0, 1.0)
+        return np.arange(2 * e, 2 * e + 4), deflection_shape(xi, L, self.phi[e])[0]
+
+    def element_moments(self, u: np.ndarray) -> np.ndarray:
+        """Bending moments at both ends of every element [N m], shape (..., n-1, 2).
+
+        Parameters
+        ----------
+        u : ndarray, shape (..., 2n)
+            Full displacement vector(s).
+        """
+        n = self.s.size
+        idx = 2 * np.arange(n - 1)[:, None] + np.arange(4)[None, :]
+        ue = np.asarray(u)[..., idx]                      # (..., n-1, 4)
+        f = np.einsum("eij,...ej->...ei", self.Ke, ue)
+        return np.stack([-f[..., 1], f[..., 3]], axis=-1)
+
+    def nodal_moments(self, u: np.ndarray) -> np.ndarray:
+        """Bending moment at the nodes [N m], shape (..., n): mean of adjacent element ends."""
+        me = self.element_moments(u)
+        n = self.s.size
+        out = np.zeros(me.shape[:-2] + (n,))
+        cnt = np.zeros(n)
+        out[..., :-1] += me[..., 0]
+        out[..., 1:] += me[..., 1]
+        cnt[:-1] += 1
+        cnt[1:] += 1
+        return out / cnt
+
+
+def beam_body(name: str, s: np.ndarray, profile: BeamProfile) -> BeamBody:
+    """Assemble the FE model of a beam with nodes ``s`` [m] and section ``profile``."""
+    s = np.asarray(s, dtype=float)
+    base = profile.base
+    mid = 0.5 * (s[:-1] + s[1:])
+    A, I = profile.at(mid)
+    ne = s.size - 1
+    Ke = np.empty((ne, 4, 4))
+    Me = np.empty((ne, 4, 4))
+    phi = np.empty(ne)
+    for e in range(ne):
+        L = s[e + 1] - s[e]
+        Ke[e], Me[e] = timoshenko_matrices(L, base.E, base.G, A[e], I[e], base.rho, base.kappa)
+        phi[e] = shear_parameter(L, base.E, base.G, A[e], I[e], base.kappa)
+    idx = 2 * np.arange(ne)[:, None] + np.arange(4)[None, :]
+    rows = np.repeat(idx, 4, axis=1).ravel()
+    cols = np.tile(idx, (1, 4)).ravel()
+    n = 2 * s.size
+    K = sp.csr_matrix((Ke.ravel(), (rows, cols)), shape=(n, n))
+    M = sp.csr_matrix((Me.ravel(), (rows, cols)), shape=(n, n))
+    return BeamBody(name=name, s=s, profile=profile, K=K, M=M, Ke=Ke, phi=phi)
+
+
+__all__ = ["BeamBody", "beam_body", "mesh_line", "end_moments"]

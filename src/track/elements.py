@@ -1,0 +1,125 @@
+"""Two-node Timoshenko beam element for bending in one plane.
+
+Degrees of freedom per element: ``[w1, th1, w2, th2]`` with ``w`` the deflection
+(upward +) [m] and ``th`` the cross-section rotation [rad], positive in the sense of
+``dw/ds`` (so that ``th = dw/ds`` in the Euler-Bernoulli limit).
+
+The element uses the interdependent interpolation of Friedman & Kosmatka (1993),
+"An improved two-node Timoshenko beam finite element", Computers & Structures
+47(3): shape functions that solve the homogeneous static Timoshenko equations, so
+the stiffness matrix is exact for nodal loads and the element is free of shear
+locking. Mass: consistent translational + rotary inertia from the same shape
+functions. Bending moment sign: positive = sagging (tension at the foot),
+``M = E I dth/ds``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def shear_parameter(L: float, E: float, G: float, A: float, I: float, kappa: float) -> float:
+    """Phi = 12 E I / (kappa G A L^2) [-] of an element of length ``L`` [m]."""
+    return 12.0 * E * I / (kappa * G * A * L * L)
+
+
+def timoshenko_matrices(L: float, E: float, G: float, A: float, I: float, rho: float,
+                        kappa: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stiffness and mass matrix of one element.
+
+    Parameters
+    ----------
+    L : float
+        Element length [m].
+    E, G : float
+        Young's and shear modulus [Pa].
+    A, I : float
+        Area [m^2] and second moment of area [m^4].
+    rho : float
+        Density [kg/m^3].
+    kappa : float
+        Shear coefficient [-].
+
+    Returns
+    -------
+    K, M : ndarray, shape (4, 4)
+        Stiffness [N/m, N, N m] and mass [kg, kg m, kg m^2] matrices.
+    """
+    phi = shear_parameter(L, E, G, A, I, kappa)
+    p1 = 1.0 + phi
+    L2 = L * L
+    K = (E * I / (p1 * L ** 3)) * np.array([
+        [12.0, 6 * L, -12.0, 6 * L],
+        [6 * L, (4 + phi) * L2, -6 * L, (2 - phi) * L2],
+        [-12.0, -6 * L, 12.0, -6 * L],
+        [6 * L, (2 - phi) * L2, -6 * L, (4 + phi) * L2],
+    ])
+    f2 = phi * phi
+    a = 70 * f2 + 147 * phi + 78
+    b = (35 * f2 + 77 * phi + 44) * L / 4
+    c = 35 * f2 + 63 * phi + 27
+    d = (35 * f2 + 63 * phi + 26) * L / 4
+    e = (7 * f2 + 14 * phi + 8) * L2 / 4
+    f = (7 * f2 + 14 * phi + 6) * L2 / 4
+    M_t = (rho * A * L / (210 * p1 * p1)) * np.array([
+        [a, b, c, -d],
+        [b, e, d, -f],
+        [c, d, a, -b],
+        [-d, -f, -b, e],
+    ])
+    g = (15 * phi - 3) * L
+    r1 = (10 * f2 + 5 * phi + 4) * L2
+    r2 = (5 * f2 - 5 * phi - 1) * L2
+    M_r = (rho * I / (30 * p1 * p1 * L)) * np.array([
+        [36.0, -g, -36.0, -g],
+        [-g, r1, g, r2],
+        [-36.0, g, 36.0, g],
+        [-g, r2, g, r1],
+    ])
+    return K, M_t + M_r
+
+
+def deflection_shape(xi: np.ndarray, L: float, phi: float) -> np.ndarray:
+    """Interdependent-interpolation shape functions of the deflection.
+
+    Parameters
+    ----------
+    xi : ndarray, shape (m,)
+        Local coordinate s/L in [0, 1].
+    L : float
+        Element length [m].
+    phi : float
+        Shear parameter of the element (:func:`shear_parameter`).
+
+    Returns
+    -------
+    N : ndarray, shape (m, 4)
+        ``w(xi) = N @ [w1, th1, w2, th2]``.
+    """
+    xi = np.atleast_1d(np.asarray(xi, dtype=float))
+    x2, x3 = xi * xi, xi ** 3
+    s = 1.0 / (1.0 + phi)
+    return np.stack([
+        s * (2 * x3 - 3 * x2 - phi * xi + 1 + phi),
+        s * L * (x3 - (2 + phi / 2) * x2 + (1 + phi / 2) * xi),
+        s * (-2 * x3 + 3 * x2 + phi * xi),
+        s * L * (x3 - (1 - phi / 2) * x2 - (phi / 2) * xi),
+    ], axis=1)
+
+
+def end_moments(K: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Internal bending moments at the two element ends [N m] (sagging +).
+
+    Parameters
+    ----------
+    K : ndarray, shape (4, 4)
+        Element stiffness.
+    u : ndarray, shape (..., 4)
+        Element displacement vectors.
+
+    Returns
+    -------
+    ndarray, shape (..., 2)
+        ``[M(s=0), M(s=L)]``; exact for an element without load between its nodes.
+    """
+    f = np.asarray(u) @ K.T
+    return np.stack([-f[..., 1], f[..., 3]], axis=-1)

@@ -1,0 +1,404 @@
+"""Assembly of the reduced track model from a layout.
+
+Pipeline: :func:`track.layout.build_layout` → FE beam bodies
+(:mod:`track.bodies`) → Craig–Bampton per body (:mod:`track.reduction`, cached) →
+global reduced ``M``, ``K``, ``C`` with rail pads (linear Kelvin bushings) and the
+bi-linear ballast bushings (:class:`track.ballast.Ballast`, kept apart because they
+are nonlinear).
+
+Global coordinates are the union of every body's reduced coordinates; boundary
+coordinates of rail ends joined at a :class:`track.layout.Joint` share one global
+coordinate (a rigid weld).
+"""
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .ballast import Ballast
+from .bodies import BeamBody, beam_body, mesh_line
+from .layout import Layout, build_layout
+from .params import GRAVITY, TrackParams
+from .reduction import ReducedBody, craig_bampton, static_correction
+
+
+@dataclass
+class Body:
+    """One reduced body in the assembled model.
+
+    Attributes
+    ----------
+    name : str
+    kind : str
+        ``rail`` | ``crossing`` | ``check`` | ``sleeper``.
+    origin : float
+        Track coordinate of s = 0: x_start for rails, y_start for sleepers [m].
+    x : float
+        For sleepers the track coordinate of the sleeper [m]; NaN for rails.
+    sleeper : int
+        Sleeper index, -1 for rails.
+    fom : BeamBody
+    rom : ReducedBody
+    gdofs : ndarray of int, shape (nr,)
+        Global index of each reduced coordinate.
+    """
+
+    name: str
+    kind: str
+    origin: float
+    x: float
+    sleeper: int
+    fom: BeamBody
+    rom: ReducedBody
+    gdofs: np.ndarray
+
+    def local(self, coord: float) -> float:
+        """Body coordinate s [m] of a track coordinate (x for rails, y for sleepers)."""
+        return coord - self.origin
+
+    def coords(self) -> np.ndarray:
+        """Track coordinates of the FE nodes [m] (x for rails, y for sleepers)."""
+        return self.origin + self.fom.s
+
+
+@dataclass(frozen=True)
+class PointMap:
+    """Vertical displacement of one material point as a linear map of q.
+
+    ``w = weights @ q[gidx]``; a force F at the point adds ``F * weights`` to the
+    generalized forces at ``gidx``. A force F acting *at* the point also deflects it
+    locally by ``residual * F`` (the static part of the truncated modes,
+    :func:`track.reduction.static_correction`), so the displacement under a load
+    is ``weights @ q[gidx] + residual * F``.
+    """
+
+    body: str
+    coord: float
+    gidx: np.ndarray
+    weights: np.ndarray
+    residual: float = 0.0  # m/N
+
+    def value(self, q: np.ndarray, force: float = 0.0) -> float:
+        """Displacement [m] for state q, with a force [N] acting at the point itself."""
+        return float(self.weights @ q[self.gidx]) + self.residual * force
+
+
+@dataclass
+class Pads:
+    """Linear rail-pad bushings between a rail dof ``i`` and a sleeper dof ``j``."""
+
+    i: np.ndarray
+    j: np.ndarray
+    k: np.ndarray  # N/m
+    c: np.ndarray  # N s/m
+    sleeper: np.ndarray
+    rail: tuple
+    y: np.ndarray  # lateral position of the bushing on the sleeper [m]
+
+
+@dataclass
+class BuildStats:
+    """Sizes and one-time costs of a model build."""
+
+    fom_dofs: int = 0
+    rom_dofs: int = 0
+    bodies: int = 0
+    reductions: int = 0
+    cache_hits: int = 0
+    t_mesh_assembly: float = 0.0
+    t_reduction: float = 0.0
+    t_global: float = 0.0
+
+
+@dataclass
+class TrackModel:
+    """The assembled reduced track.
+
+    Attributes
+    ----------
+    params : TrackParams
+    layout : Layout
+    bodies : list of Body
+    n : int
+        Number of global reduced coordinates.
+    M, K, C : scipy.sparse.csr_matrix, shape (n, n)
+        Bodies plus rail pads; the ballast is in ``ballast``.
+    f_gravity : ndarray, shape (n,)
+        Self-weight of rails and sleepers as generalized forces [N].
+    pads : Pads
+    ballast : Ballast
+    stats : BuildStats
+    """
+
+    params: TrackParams
+    layout: Layout
+    bodies: list
+    n: int
+    M: sp.csr_matrix
+    K: sp.csr_matrix
+    C: sp.csr_matrix
+    f_gravity: np.ndarray
+    pads: Pads
+    ballast: Ballast
+    stats: BuildStats
+    _index: dict = field(default_factory=dict, repr=False)
+
+    def body(self, name: str) -> Body:
+        try:
+            return self.bodies[self._index[name]]
+        except KeyError:
+            raise KeyError(f"no body named {name!r}") from None
+
+    def sleeper(self, index: int) -> Body:
+        return self.body(f"sleeper_{index}")
+
+    def point(self, body: str, coord: float) -> PointMap:
+        """Map of the vertical displacement at track coordinate ``coord`` on ``body``.
+
+        ``coord`` is x [m] for rails and y [m] for sleepers; it is clipped to the body.
+        """
+        b = self.body(body)
+        s = float(np.clip(b.local(coord), 0.0, b.fom.s[-1]))
+        dofs, w = b.fom.shape_row(s)
+        f = np.zeros(b.fom.ndof)
+        f[dofs] = w
+        residual = float(w @ static_correction(b.rom, f)[dofs])
+        return PointMap(body, coord, b.gdofs, w @ b.rom.T[dofs, :], residual)
+
+    def rail_point(self, side: str, x: float) -> PointMap:
+        """Map of the running rail under a wheel on ``side`` at track coordinate x [m]."""
+        return self.point(self.layout.running_body(side, x), x)
+
+    def full_field(self, body: str, q: np.ndarray, loads=()) -> np.ndarray:
+        """Full FE displacement of one body, shape (..., 2 n_nodes).
+
+        ``u = T q`` plus, for point loads ``[(PointMap, F), ...]`` acting on this body
+        (F shape () or (nt,) matching q's leading axis), the static correction of the
+        truncated modes (:func:`track.reduction.static_correction`).
+        """
+        b = self.body(body)
+        u = np.asarray(q)[..., b.gdofs] @ b.rom.T.T
+        for pm, F in loads:
+            if pm.body != body:
+                continue
+            s = float(np.clip(b.local(pm.coord), 0.0, b.fom.s[-1]))
+            dofs, w = b.fom.shape_row(s)
+            f = np.zeros(b.fom.ndof)
+            f[dofs] = w
+            u = u + np.multiply.outer(np.asarray(F, float), static_correction(b.rom, f))
+        return u
+
+    def tangent(self, q: np.ndarray, v: np.ndarray | None = None):
+        """Stiffness and damping linearized at state q (ballast in its current contact state)."""
+        kb, cb = self.ballast.tangent(q[self.ballast.dof], None if v is None else v[self.ballast.dof])
+        D = self.ballast.dof
+        Kb = sp.csr_matrix((kb, (D, D)), shape=(self.n, self.n))
+        Cb = sp.csr_matrix((cb, (D, D)), shape=(self.n, self.n))
+        return (self.K + Kb).tocsr(), (self.C + Cb).tocsr()
+
+
+# --------------------------------------------------------------------------- reduction cache
+_ROM_CACHE: dict = {}
+ROM_CACHE_MAX = 4096  # bodies kept in memory (a 40-sleeper panel has ~50)
+
+
+def _rom_key(s: np.ndarray, profile, boundary: np.ndarray, f_modes: float) -> str:
+    h = hashlib.sha1()
+    h.update(np.round(s, 9).tobytes())
+    h.update(repr(profile).encode())
+    h.update(np.asarray(boundary, np.int64).tobytes())
+    h.update(repr(float(f_modes)).encode())
+    return h.hexdigest()
+
+
+def clear_rom_cache() -> None:
+    """Forget every cached reduced body."""
+    _ROM_CACHE.clear()
+
+
+def _reduce_cached(fom: BeamBody, boundary: np.ndarray, f_modes: float, stats: BuildStats) -> ReducedBody:
+    key = _rom_key(fom.s, fom.profile, boundary, f_modes)
+    rom = _ROM_CACHE.get(key)
+    if rom is not None:
+        stats.cache_hits += 1
+        return rom
+    rom = craig_bampton(fom.K, fom.M, boundary, f_modes=f_modes)
+    stats.reductions += 1
+    if len(_ROM_CACHE) >= ROM_CACHE_MAX:
+        _ROM_CACHE.pop(next(iter(_ROM_CACHE)))
+    _ROM_CACHE[key] = rom
+    return rom
+
+
+# --------------------------------------------------------------------------- build
+def _pad_seat_points(seat, kind: str, two_bushings: bool) -> list[tuple[float, float]]:
+    """Lateral positions and stiffness shares of the bushing(s) of one rail seat."""
+    if kind == "crossing" and two_bushings:
+        half = 0.5 * seat.width
+        return [(seat.y - half, 0.5), (seat.y + half, 0.5)]
+    return [(seat.y, 1.0)]
+
+
+def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel:
+    """Build the reduced track model.
+
+    Parameters
+    ----------
+    params : TrackParams
+    layout : Layout, optional
+        A precomputed layout of ``params.layout``.
+
+    Returns
+    -------
+    TrackModel
+    """
+    if params.model != "beam":
+        raise NotImplementedError(f"track.model = {params.model!r} is not available yet (only 'beam')")
+    stats = BuildStats()
+    t0 = time.perf_counter()
+    lay = layout if layout is not None else build_layout(params.layout)
+    red = params.reduction
+    f_modes = red.mode_factor * red.f_cut
+    pad, bal = params.rail_pad, params.ballast
+    n_sl = len(lay.sleepers)
+
+    # rail seats per sleeper: (rail name, y, stiffness share)
+    seats_on = [[] for _ in range(n_sl)]
+    for r in lay.rails:
+        for seat in r.seats:
+            for y, share in _pad_seat_points(seat, r.kind, pad.two_bushings):
+                seats_on[seat.sleeper].append((r.name, seat.x, y, share))
+    joint_ends = {(name, end) for j in lay.joints for name, end in j.ends}
+
+    # ---- FE bodies and their retained dofs
+    specs = []  # (name, kind, origin, x, sleeper, fom, boundary dofs, dof keys)
+    for r in lay.rails:
+        L = r.x_end - r.x_start
+        seat_s = np.array([st.x - r.x_start for st in r.seats])
+        fom = beam_body(r.name, mesh_line(L, seat_s, red.element_length), r.profile)
+        bnodes = [fom.node(s) for s in seat_s]
+        bdofs = [2 * i for i in bnodes]
+        keys = [(r.name, 2 * i) for i in bnodes]
+        for end, node in (("start", 0), ("end", fom.s.size - 1)):
+            if (r.name, end) in joint_ends:
+                for d in (2 * node, 2 * node + 1):
+                    if d not in bdofs:
+                        bdofs.append(d)
+                        keys.append((r.name, d))
+        specs.append((r.name, r.kind, r.x_start, np.nan, -1, fom, np.array(bdofs), keys))
+
+    ballast_rows = []  # (sleeper, body name, y, trib length, width)
+    for sl in lay.sleepers:
+        L = sl.length
+        nb = max(2, int(np.ceil(L / bal.spacing - 1e-9)))
+        trib = L / nb
+        yb = sl.y_start + trib * (np.arange(nb) + 0.5)
+        ys = np.array([y for _, _, y, _ in seats_on[sl.index]])
+        pts = np.concatenate([ys, yb]) - sl.y_start
+        fom = beam_body(f"sleeper_{sl.index}", mesh_line(L, pts, red.element_length), sl.profile)
+        nodes = sorted({fom.node(s) for s in pts})
+        bdofs = [2 * i for i in nodes]
+        name = f"sleeper_{sl.index}"
+        specs.append((name, "sleeper", sl.y_start, sl.x, sl.index, fom, np.array(bdofs),
+                      [(name, d) for d in bdofs]))
+        for y in yb:
+            ballast_rows.append((sl.index, name, y, trib, sl.profile.base.width))
+        stats.fom_dofs += fom.ndof
+    stats.fom_dofs += sum(sp_[5].ndof for sp_ in specs if sp_[1] != "sleeper")
+    stats.t_mesh_assembly = time.perf_counter() - t0
+
+    # ---- Craig–Bampton per body (cached)
+    t1 = time.perf_counter()
+    roms = [_reduce_cached(fom, bd, f_modes, stats) for (_, _, _, _, _, fom, bd, _) in specs]
+    stats.t_reduction = time.perf_counter() - t1
+
+    # ---- global numbering (joints share boundary coordinates)
+    t2 = time.perf_counter()
+    alias = {}
+    for j in lay.joints:
+        for name, end in j.ends:
+            fom = next(s[5] for s in specs if s[0] == name)
+            node = 0 if end == "start" else fom.s.size - 1
+            for d in (0, 1):
+                alias[(name, 2 * node + d)] = ("joint", j.x, d)
+    gid = {}
+    n = 0
+    bodies = []
+    for (name, kind, origin, x, sl, fom, bd, keys), rom in zip(specs, roms):
+        g = np.empty(rom.nr, dtype=int)
+        for a, key in enumerate(keys):
+            key = alias.get(key, key)
+            if key not in gid:
+                gid[key] = n
+                n += 1
+            g[a] = gid[key]
+        g[len(keys):] = n + np.arange(rom.nr - len(keys))
+        n += rom.nr - len(keys)
+        bodies.append(Body(name, kind, origin, x, sl, fom, rom, g))
+    index = {b.name: k for k, b in enumerate(bodies)}
+
+    rows, cols, kv, mv = [], [], [], []
+    fg = np.zeros(n)
+    beta = params.structural_damping
+    for b in bodies:
+        r_, c_ = np.meshgrid(b.gdofs, b.gdofs, indexing="ij")
+        rows.append(r_.ravel())
+        cols.append(c_.ravel())
+        kv.append(b.rom.K.ravel())
+        mv.append(b.rom.M.ravel())
+        unit = np.zeros(b.fom.ndof)
+        unit[0::2] = 1.0
+        np.add.at(fg, b.gdofs, -GRAVITY * (b.rom.T.T @ (b.fom.M @ unit)))
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    K = sp.csr_matrix((np.concatenate(kv), (rows, cols)), shape=(n, n))
+    M = sp.csr_matrix((np.concatenate(mv), (rows, cols)), shape=(n, n))
+    C = beta * K
+
+    # ---- rail pads
+    overrides = {o.sleeper: o.stiffness_scale for o in pad.overrides}
+    pi, pj, pk, pc, psl, prl, py = [], [], [], [], [], [], []
+    for sl in lay.sleepers:
+        sb = bodies[index[f"sleeper_{sl.index}"]]
+        for rname, x, y, share in seats_on[sl.index]:
+            rb = bodies[index[rname]]
+            i = rb.gdofs[list(rb.rom.boundary).index(2 * rb.fom.node(x - rb.origin))]
+            j = sb.gdofs[list(sb.rom.boundary).index(2 * sb.fom.node(y - sb.origin))]
+            scale = pad.stiffness_scale * overrides.get(sl.index, 1.0)
+            pi.append(i); pj.append(j); psl.append(sl.index); prl.append(rname); py.append(y)
+            pk.append(share * pad.stiffness * scale)
+            pc.append(share * pad.damping)
+    pads = Pads(np.array(pi), np.array(pj), np.array(pk), np.array(pc), np.array(psl), tuple(prl), np.array(py))
+    K = K + _spring_matrix(pads.i, pads.j, pads.k, n)
+    C = C + _spring_matrix(pads.i, pads.j, pads.c, n)
+
+    # ---- ballast
+    voids = {v.sleeper: np.asarray(v.gaps, float) for v in bal.voids}
+    bdof, bk, bc, bgap, bsl, by, barea = [], [], [], [], [], [], []
+    for sl_idx, name, y, trib, width in ballast_rows:
+        sb = bodies[index[name]]
+        bdof.append(sb.gdofs[list(sb.rom.boundary).index(2 * sb.fom.node(y - sb.origin))])
+        bk.append(bal.stiffness_per_length * bal.stiffness_scale * trib)
+        bc.append(bal.damping_per_length * trib)
+        sl = lay.sleepers[sl_idx]
+        g6 = voids.get(sl_idx)
+        bgap.append(0.0 if g6 is None else float(np.interp(y, np.linspace(sl.y_start, sl.y_end, 6), g6)))
+        bsl.append(sl_idx); by.append(y); barea.append(trib * width)
+    ballast = Ballast(dof=np.array(bdof), k=np.array(bk), c=np.array(bc), gap=np.array(bgap),
+                      sleeper=np.array(bsl), y=np.array(by), area=np.array(barea))
+    stats.t_global = time.perf_counter() - t2
+    stats.rom_dofs = n
+    stats.bodies = len(bodies)
+    return TrackModel(params=params, layout=lay, bodies=bodies, n=n, M=M.tocsr(), K=K.tocsr(),
+                      C=C.tocsr(), f_gravity=fg, pads=pads, ballast=ballast, stats=stats, _index=index)
+
+
+def _spring_matrix(i: np.ndarray, j: np.ndarray, k: np.ndarray, n: int) -> sp.csr_matrix:
+    """Stiffness (or damping) matrix of two-node springs between dofs i and j."""
+    rows = np.concatenate([i, j, i, j])
+    cols = np.concatenate([i, j, j, i])
+    vals = np.concatenate([k, k, -k, -k])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))

@@ -1,0 +1,257 @@
+"""Parameter dataclasses of the track model (SI units throughout).
+
+These are the contracts between the scenario loader (``orchestrator.scenario``),
+the layout generator (``track.layout``) and the model builder (``track.model``).
+They hold numbers only, never file paths.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+GRAVITY = 9.81  # m/s^2
+
+
+@dataclass(frozen=True)
+class BeamSection:
+    """Cross-section and material of a beam body (constant along the body).
+
+    Attributes
+    ----------
+    E, G : float
+        Young's and shear modulus [Pa].
+    A : float
+        Cross-section area [m^2].
+    I : float
+        Second moment of area for vertical bending [m^4].
+    rho : float
+        Density [kg/m^3]; mass per length is ``rho * A`` [kg/m].
+    kappa : float
+        Timoshenko shear coefficient [-].
+    height : float
+        Section height [m]; used for strain at the extreme fibre (gauges).
+    width : float
+        Section width [m]; for sleepers the bottom width that carries ballast pressure.
+    """
+
+    E: float
+    G: float
+    A: float
+    I: float
+    rho: float
+    kappa: float
+    height: float
+    width: float
+
+    @property
+    def mass_per_length(self) -> float:
+        return self.rho * self.A
+
+    def scaled(self, area: float = 1.0, inertia: float = 1.0) -> "BeamSection":
+        """Section with area and second moment multiplied by the given factors."""
+        return BeamSection(self.E, self.G, self.A * area, self.I * inertia, self.rho,
+                           self.kappa, self.height, self.width)
+
+
+# 60E1 (EN 13674-1): m = 60.21 kg/m, A = 76.70 cm^2, I_y = 3038 cm^4, h = 172 mm, foot 150 mm.
+# Shear coefficient 0.34 (lower end of the 0.34-0.40 range in DESIGN.md §7; the value used
+# by Knothe & Grassie for UIC60).
+RAIL_60E1 = BeamSection(E=210e9, G=81e9, A=76.70e-4, I=3038e-8, rho=60.21 / 76.70e-4,
+                        kappa=0.34, height=0.172, width=0.150)
+
+# Concrete turnout bearer / sleeper (DESIGN.md §7): E = 38 GPa, nu = 0.2, 0.28 m wide (bottom),
+# 0.22 m high, rectangular: A = b h, I = b h^3 / 12, rho = 2500 kg/m^3 (154 kg/m).
+_b, _h = 0.28, 0.22
+CONCRETE_BEARER = BeamSection(E=38e9, G=38e9 / (2 * 1.2), A=_b * _h, I=_b * _h ** 3 / 12,
+                              rho=2500.0, kappa=5.0 / 6.0, height=_h, width=_b)
+
+# Check rail 33C1 (UIC 33): m = 32.6 kg/m, A = 41.6 cm^2; vertical I taken as 1000 cm^4
+# (approximate: the check rail carries no wheel load, only its mass and bending matter).
+CHECK_RAIL_33C1 = BeamSection(E=210e9, G=81e9, A=41.6e-4, I=1000e-8, rho=32.6 / 41.6e-4,
+                              kappa=0.34, height=0.150, width=0.100)
+
+RAIL_SECTIONS = {"60E1": RAIL_60E1}
+
+
+@dataclass(frozen=True)
+class BeamProfile:
+    """A beam section that varies along the body (crossing rail, bearers).
+
+    Properties are interpolated linearly in ``s`` between the stations; each
+    element uses the value at its midpoint. A constant section has one station.
+
+    Attributes
+    ----------
+    base : BeamSection
+        Material and reference section.
+    s : tuple of float
+        Stations along the body axis [m] (increasing); empty for a constant section.
+    area_factor, inertia_factor : tuple of float
+        Multipliers of ``base.A`` and ``base.I`` at the stations [-].
+    """
+
+    base: BeamSection
+    s: tuple = ()
+    area_factor: tuple = ()
+    inertia_factor: tuple = ()
+
+    def at(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Area [m^2] and second moment [m^4] at positions ``s`` (shape (n,))."""
+        s = np.asarray(s, dtype=float)
+        if not self.s:
+            return np.full(s.shape, self.base.A), np.full(s.shape, self.base.I)
+        fa = np.interp(s, self.s, self.area_factor)
+        fi = np.interp(s, self.s, self.inertia_factor)
+        return self.base.A * fa, self.base.I * fi
+
+
+@dataclass(frozen=True)
+class LayoutParams:
+    """Parameters of the track layout (``track.layout`` in the scenario YAML).
+
+    Attributes
+    ----------
+    type : str
+        ``"plain"`` (straight track) or ``"turnout"`` (crossing panel).
+    crossing : str
+        Crossing ratio ``"1:n"`` (tan of the crossing angle = 1/n).
+    radius : float
+        Turnout (diverging route) radius [m].
+    sleeper_spacing : float
+        Centre distance of sleepers [m].
+    sleepers : int
+        Number of modelled sleepers, indexed 0..N-1 in increasing track coordinate.
+    route : str
+        ``"through"`` or ``"diverging"``: the route the vehicle runs on.
+    hand : str
+        ``"left"`` or ``"right"``: side to which the diverging route turns.
+    gauge : float
+        Track gauge between running edges [m].
+    rail : str
+        Rail profile name (key of ``RAIL_SECTIONS``).
+    transition_sleeper : int or None
+        Index of the sleeper under the crossing transition (wheel transfer from
+        wing rail to nose); ``None`` -> ``sleepers // 2 + 1``.
+    sleeper_length : float
+        Length of a plain-line sleeper [m] (turnout bearers grow to span their rails).
+    """
+
+    type: str = "turnout"
+    crossing: str = "1:12"
+    radius: float = 500.0
+    sleeper_spacing: float = 0.6
+    sleepers: int = 40
+    route: str = "through"
+    hand: str = "left"
+    gauge: float = 1.435
+    rail: str = "60E1"
+    transition_sleeper: int | None = None
+    sleeper_length: float = 2.6
+
+    @property
+    def crossing_n(self) -> float:
+        return float(self.crossing.split(":")[1])
+
+
+@dataclass(frozen=True)
+class PadOverride:
+    """Local rail-pad stiffness scale at one sleeper (all rail seats on it)."""
+
+    sleeper: int
+    stiffness_scale: float
+
+
+@dataclass(frozen=True)
+class RailPadParams:
+    """Rail pads as Kelvin bushings per rail seat.
+
+    Attributes
+    ----------
+    stiffness : float
+        Vertical stiffness per rail seat [N/m].
+    damping : float
+        Viscous damping per rail seat [N s/m].
+    stiffness_scale : float
+        Global scale h2 [-].
+    overrides : tuple of PadOverride
+        Per-sleeper scale factors (multiply h2).
+    two_bushings : bool
+        Model the wide crossing-rail seat with two bushings (half stiffness each)
+        across the seat instead of one at its centre.
+    """
+
+    stiffness: float = 1.2e8
+    damping: float = 2.0e4
+    stiffness_scale: float = 1.0
+    overrides: tuple = ()
+    two_bushings: bool = False
+
+
+@dataclass(frozen=True)
+class VoidSpec:
+    """Ballast void under one sleeper: gaps at 6 equidistant points from end to end [m]."""
+
+    sleeper: int
+    gaps: tuple
+
+
+@dataclass(frozen=True)
+class BallastParams:
+    """Bi-linear (compression-only) ballast bushings along each sleeper.
+
+    Attributes
+    ----------
+    stiffness_per_length : float
+        Bed stiffness per metre of sleeper [N/m/m].
+    damping_per_length : float
+        Bed damping per metre of sleeper [N s/m/m].
+    stiffness_scale : float
+        Global scale h1 [-].
+    voids : tuple of VoidSpec
+        Void gaps per sleeper.
+    spacing : float
+        Maximum lateral distance between ballast bushings along a sleeper [m].
+    """
+
+    stiffness_per_length: float = 4.0e7
+    damping_per_length: float = 3.0e4
+    stiffness_scale: float = 1.0
+    voids: tuple = ()
+    spacing: float = 0.4
+
+
+@dataclass(frozen=True)
+class ReductionParams:
+    """Craig–Bampton settings.
+
+    Attributes
+    ----------
+    f_cut : float
+        Cut-off frequency of the model [Hz]: reduced eigenfrequencies below it
+        are within 1 % of the full model (tests/test_reduction.py). 1500 Hz covers
+        the pinned-pinned resonance (~1030 Hz) and the P1 impact force; raise it for
+        receptances to higher frequencies.
+    mode_factor : float
+        Fixed-interface modes are kept up to ``mode_factor * f_cut`` (2.5: the
+        smallest factor that met the 1 % bound on rails and bearers).
+    element_length : float
+        Maximum FE element length for rails and sleepers [m].
+    """
+
+    f_cut: float = 1500.0
+    mode_factor: float = 2.5
+    element_length: float = 0.1
+
+
+@dataclass(frozen=True)
+class TrackParams:
+    """Everything the track model builder needs (the ``track:`` section)."""
+
+    model: str = "beam"
+    layout: LayoutParams = field(default_factory=LayoutParams)
+    rail_pad: RailPadParams = field(default_factory=RailPadParams)
+    ballast: BallastParams = field(default_factory=BallastParams)
+    reduction: ReductionParams = field(default_factory=ReductionParams)
+    impact_angle: float = 0.006  # crossing.impact_angle [rad]
+    structural_damping: float = 0.0  # stiffness-proportional Rayleigh beta of the bodies [s]
