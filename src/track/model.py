@@ -23,7 +23,7 @@ from .ballast import Ballast
 from .bodies import BeamBody, beam_body, mesh_line
 from .layout import Layout, build_layout
 from .params import GRAVITY, TrackParams
-from .reduction import ReducedBody, craig_bampton, static_correction
+from .reduction import ReducedBody, craig_bampton, element_residual, static_correction
 
 
 @dataclass
@@ -55,6 +55,7 @@ class Body:
     fom: BeamBody
     rom: ReducedBody
     gdofs: np.ndarray
+    residual_blocks: dict = field(default_factory=dict, repr=False)  # element -> 4x4 [m/N]
 
     def local(self, coord: float) -> float:
         """Body coordinate s [m] of a track coordinate (x for rails, y for sleepers)."""
@@ -164,10 +165,11 @@ class TrackModel:
         b = self.body(body)
         s = float(np.clip(b.local(coord), 0.0, b.fom.s[-1]))
         dofs, w = b.fom.shape_row(s)
-        f = np.zeros(b.fom.ndof)
-        f[dofs] = w
-        residual = float(w @ static_correction(b.rom, f)[dofs])
-        return PointMap(body, coord, b.gdofs, w @ b.rom.T[dofs, :], residual)
+        e = dofs[0] // 2
+        R = b.residual_blocks.get(e)
+        if R is None:  # the 4x4 residual flexibility of this element, computed once
+            R = b.residual_blocks[e] = element_residual(b.rom, dofs)
+        return PointMap(body, coord, b.gdofs, w @ b.rom.T[dofs, :], float(w @ R @ w))
 
     def rail_point(self, side: str, x: float) -> PointMap:
         """Map of the running rail under a wheel on ``side`` at track coordinate x [m]."""

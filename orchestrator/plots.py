@@ -1,0 +1,105 @@
+"""Plots of track results (matplotlib imported inside each function; each returns a Figure)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def plot_body_lines(rail, sleeper, title: str, rail_label: str, sleeper_label: str,
+                    marks_rail=(), marks_sleeper=()):
+    """Deflection and bending moment along a rail and a sleeper (like seed 001 Figs. 4-5).
+
+    Parameters
+    ----------
+    rail, sleeper : dict of label -> track.post.BodyResponse (one state each)
+    marks_rail, marks_sleeper : sequence of float
+        Positions to mark with dashed lines (e.g. wheels, TCP) [m].
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(2, 2, figsize=(11, 6.5), sharex="col")
+    for col, (data, label, marks) in enumerate(((rail, rail_label, marks_rail),
+                                                (sleeper, sleeper_label, marks_sleeper))):
+        for name, br in data.items():
+            ax[0, col].plot(br.coord, 1e3 * br.w, label=name)
+            ax[1, col].plot(br.coord, 1e-3 * br.moment, label=name)
+        for m in marks:
+            ax[0, col].axvline(m, ls="--", c="0.5", lw=0.8)
+            ax[1, col].axvline(m, ls="--", c="0.5", lw=0.8)
+        ax[0, col].set_title(label)
+        ax[0, col].set_ylabel("vertical displacement [mm]")
+        ax[1, col].set_ylabel("bending moment [kN m]")
+        ax[1, col].set_xlabel("track coordinate x [m]" if col == 0 else "lateral coordinate y [m]")
+        ax[0, col].legend(fontsize=8)
+        for a in ax[:, col]:
+            a.grid(alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def plot_envelopes(coord_r, env_r, coord_s, env_s, y_p, p_max, rail_label, sleeper_label):
+    """Min/max bending-moment envelopes of a rail and a sleeper, and peak ballast pressure."""
+    plt = _plt()
+    fig, ax = plt.subplots(1, 3, figsize=(14, 4))
+    for a, c, e, lab in ((ax[0], coord_r, env_r, rail_label), (ax[1], coord_s, env_s, sleeper_label)):
+        a.fill_between(c, 1e-3 * e[0], 1e-3 * e[1], alpha=0.4)
+        a.plot(c, 1e-3 * e[1], lw=1)
+        a.plot(c, 1e-3 * e[0], lw=1)
+        a.set_title(f"moment envelope: {lab}")
+        a.set_ylabel("bending moment [kN m]")
+        a.grid(alpha=0.3)
+    ax[0].set_xlabel("x [m]")
+    ax[1].set_xlabel("y [m]")
+    ax[2].plot(y_p, 1e-3 * p_max, "o-")
+    ax[2].set_title(f"peak ballast pressure: {sleeper_label}")
+    ax[2].set_xlabel("y [m]")
+    ax[2].set_ylabel("pressure [kPa]")
+    ax[2].grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def plot_time_series(t, series: dict, ylabel: str, title: str):
+    """Several signals against time."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(10, 4))
+    for name, y in series.items():
+        ax.plot(t, y, label=name, lw=1)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def plot_frf(f, H_by_label: dict, title: str):
+    """Receptance magnitude (log) and phase."""
+    plt = _plt()
+    fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    for lab, H in H_by_label.items():
+        ax[0].semilogy(f, np.abs(H), label=lab)
+        ax[1].plot(f, np.degrees(np.angle(H)), label=lab)
+    ax[0].set_ylabel("receptance [m/N]")
+    ax[1].set_ylabel("phase [deg]")
+    ax[1].set_xlabel("frequency [Hz]")
+    ax[0].set_title(title)
+    ax[0].legend(fontsize=8)
+    for a in ax:
+        a.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    return fig
+
+
+def save(fig, path) -> None:
+    """Write a figure and release it."""
+    import matplotlib.pyplot as plt
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
