@@ -82,6 +82,8 @@ class PointMap:
     gidx: np.ndarray
     weights: np.ndarray
     residual: float = 0.0  # m/N
+    element: int = -1          # FE element of the body the point lies in
+    shape: np.ndarray | None = None  # its 4 deflection shape-function values
 
     def value(self, q: np.ndarray, force: float = 0.0) -> float:
         """Displacement [m] for state q, with a force [N] acting at the point itself."""
@@ -169,7 +171,7 @@ class TrackModel:
         R = b.residual_blocks.get(e)
         if R is None:  # the 4x4 residual flexibility of this element, computed once
             R = b.residual_blocks[e] = element_residual(b.rom, dofs)
-        return PointMap(body, coord, b.gdofs, w @ b.rom.T[dofs, :], float(w @ R @ w))
+        return PointMap(body, coord, b.gdofs, w @ b.rom.T[dofs, :], float(w @ R @ w), e, w)
 
     def rail_point(self, side: str, x: float) -> PointMap:
         """Map of the running rail under a wheel on ``side`` at track coordinate x [m]."""

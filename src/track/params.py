@@ -254,4 +254,5 @@ class TrackParams:
     ballast: BallastParams = field(default_factory=BallastParams)
     reduction: ReductionParams = field(default_factory=ReductionParams)
     impact_angle: float = 0.006  # crossing.impact_angle [rad]
+    dipped_joint: float = 0.0  # plain track only: total angle of a dipped joint mid-panel, left rail [rad]
     structural_damping: float = 0.0  # stiffness-proportional Rayleigh beta of the bodies [s]

@@ -1,0 +1,153 @@
+"""The ``turnout`` command line: parses arguments and delegates to :mod:`orchestrator.jobs`.
+
+No logic lives here (as in FMPy's ``command_line.py``). User errors
+(:class:`~orchestrator.errors.UserInputError`, which includes
+:class:`~orchestrator.errors.ScenarioError`, and unusable files or folders)
+are printed as one line ``turnout: error: ...`` and give exit status 2;
+set ``TURNOUT_DEBUG=1`` to get the traceback of an OSError instead.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Sequence
+
+from . import __version__
+from .errors import UserInputError, one_line
+
+PROG = "turnout"
+EXIT_USAGE = 2  # bad input (also argparse's status for usage errors)
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report it
+RESULTS_DIR = Path("results")  # default parent of --out
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line (no usage block) and do not exit."""
+
+    def error(self, message: str):
+        raise _UsageError(f"{message} (see '{self.prog} --help')")
+
+
+def _positive_float(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(x) and x > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return x
+
+
+def _point(text: str) -> str:
+    """``body:x`` (a body name and a track coordinate in m); checked for form only."""
+    body, sep, x = text.rpartition(":")
+    try:
+        ok = bool(sep and body) and math.isfinite(float(x))
+    except ValueError:
+        ok = False
+    if not ok:
+        raise argparse.ArgumentTypeError(f"expected BODY:X such as crossing:42.0, got {text!r}")
+    return text
+
+
+def _add_scenario_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenario", metavar="SCENARIO", type=Path, help="scenario YAML file")
+    p.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], dest="overrides",
+                   help="override a scenario value, e.g. --set track.ballast.stiffness_scale=2 "
+                        "or --set 'track.ballast.voids[0].gaps=[0, 1e-3, 1e-3, 1e-3, 1e-3, 0]' "
+                        "(value in YAML; repeatable)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description="Crossing-panel co-simulation: track model + vehicle FMUs.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    run = sub.add_parser("run", help="run one co-simulation",
+                         description="Run one co-simulation of SCENARIO; writes sensors.csv, results, "
+                                     "summary.json and plots into DIR.")
+    _add_scenario_args(run)
+    run.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>)")
+    run.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+    run.set_defaults(handler=_cmd_run)
+
+    frf = sub.add_parser("frf", help="receptance (frequency response) of the track",
+                         description="Receptance of the track of SCENARIO at one rail point; "
+                                     "writes frf.csv and frf.png into DIR.")
+    _add_scenario_args(frf)
+    frf.add_argument("--at", metavar="POINT", type=_point,
+                     help="BODY:X, a rail body and track coordinate [m], e.g. crossing:42.0 "
+                          "(default: the crossing rail at the transition)")
+    frf.add_argument("--fmax", metavar="HZ", type=_positive_float,
+                     help="highest frequency [Hz] (default: the model cut-off track.reduction.f_cut)")
+    frf.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>-frf)")
+    frf.set_defaults(handler=_cmd_frf)
+    return parser
+
+
+def _jobs():
+    # Imported here so that `turnout --help` and scenario errors do not pay for the model's imports.
+    return importlib.import_module("orchestrator.jobs")
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, overrides=args.overrides)
+    out_dir = args.out if args.out is not None else RESULTS_DIR / scenario.name
+    _jobs().run_scenario(scenario, out_dir, progress=not args.no_progress)
+    print(f"{PROG}: results in {out_dir}")
+    return 0
+
+
+def _cmd_frf(args: argparse.Namespace) -> int:
+    from .scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, overrides=args.overrides)
+    out_dir = args.out if args.out is not None else RESULTS_DIR / f"{scenario.name}-frf"
+    fmax = args.fmax if args.fmax is not None else scenario.track.reduction.f_cut
+    _jobs().frf_job(scenario, out_dir, at=args.at, fmax=fmax)
+    print(f"{PROG}: receptance in {out_dir}")
+    return 0
+
+
+def _error(message: str) -> int:
+    print(f"{PROG}: error: {one_line(message)}", file=sys.stderr)
+    return EXIT_USAGE
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``turnout`` command line; returns the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as exc:
+        return _error(str(exc))
+    except SystemExit as exc:  # --help / --version
+        return exc.code if isinstance(exc.code, int) else 0
+    try:
+        return args.handler(args)
+    except UserInputError as exc:
+        return _error(str(exc))
+    except OSError as exc:
+        # A file or folder the user named cannot be read or written (out dir on a
+        # read-only disk, ...). TURNOUT_DEBUG=1 shows the traceback for bug hunting.
+        if os.environ.get("TURNOUT_DEBUG"):
+            raise
+        where = f": {exc.filename}" if exc.filename else ""
+        return _error(f"{exc.strerror or exc}{where}")
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

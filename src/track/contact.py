@@ -1,0 +1,142 @@
+"""Wheel–rail normal contact and the vertical geometry of the running surfaces.
+
+Hertz normal contact per wheel and per rail surface it can touch:
+
+    F_k = C_H max(0, delta_k)^(3/2),   delta_k = z_k(x) + w(x) - z_wheel
+
+with ``z_k(x)`` the height of surface k under the wheel relative to the nominal
+running level (crossing geometry or an irregularity) [m], ``w(x)`` the rail
+deflection there (up +) [m] and ``z_wheel`` the wheel's vertical position, zero
+when it just touches the undeformed nominal rail [m]. A wheel on the crossing has
+two surfaces, the wing rail and the nose, so the wheel transfer from one to the
+other follows from the geometry.
+
+Crossing geometry (seed 001 §5, Fig. 2) parameterized by the impact (dip) angle
+``beta``: behind the theoretical crossing point (TCP) the wing rail, as seen by the
+coned wheel moving outward on it, falls with slope ``beta_w``; the nose rises with
+slope ``beta_n`` and meets the wing-rail level at the transfer point; the vertical
+heading of the wheel changes there by ``beta = beta_w + beta_n`` (the impact angle).
+The nose reaches the nominal level at ``x_full`` and stays there. A measured
+geometry can be given as a table of (x, z_wing, z_nose) instead.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+HERTZ_CONSTANT = 87e9   # N/m^1.5: DESIGN.md §7, typical for a 0.46 m wheel on a 60E1 head
+NO_SURFACE = -1.0       # m: height given to a surface that is absent (never touched)
+WING_SHARE = 0.5        # share of the impact angle taken by the falling wing rail
+JOINT_RAMP = 1.5        # m: length of each ramp of the V-shaped dipped joint
+
+
+@dataclass(frozen=True)
+class Flat:
+    """A nominal running surface (one surface at height 0)."""
+
+    def heights(self, x: float) -> tuple[float, float]:
+        return 0.0, NO_SURFACE
+
+
+@dataclass(frozen=True)
+class CrossingGeometry:
+    """Vertical geometry of wing rail and nose for the wheel that passes the crossing.
+
+    Attributes
+    ----------
+    x_tcp : float
+        Theoretical crossing point [m].
+    x_transfer : float
+        Nominal transfer point wing rail -> nose [m] (> x_tcp).
+    impact_angle : float
+        beta [rad] (6 mrad nominal, 12 worn, 18 severely worn; seed 001 §5).
+    table : tuple of 3 arrays, optional
+        Measured geometry (x, z_wing, z_nose) [m]; replaces the parameterization.
+        Outside the table the surfaces keep their end values; NaN means absent.
+    """
+
+    x_tcp: float
+    x_transfer: float
+    impact_angle: float
+    table: tuple | None = None
+
+    @property
+    def dip_depth(self) -> float:
+        """Depth of the wing rail under the nominal level at the transfer point [m]."""
+        return WING_SHARE * self.impact_angle * (self.x_transfer - self.x_tcp)
+
+    def heights(self, x: float) -> tuple[float, float]:
+        """Heights (z_wing, z_nose) [m] at track coordinate x."""
+        if self.table is not None:
+            xt, zw, zn = self.table
+            a = float(np.interp(x, xt, zw))
+            b = float(np.interp(x, xt, zn))
+            return (NO_SURFACE if np.isnan(a) else a), (NO_SURFACE if np.isnan(b) else b)
+        if x <= self.x_tcp:
+            return 0.0, NO_SURFACE
+        bw = WING_SHARE * self.impact_angle
+        bn = self.impact_angle - bw
+        z_wing = -bw * (x - self.x_tcp)
+        z_nose = min(0.0, -self.dip_depth + bn * (x - self.x_transfer))
+        return z_wing, max(z_nose, NO_SURFACE)
+
+
+@dataclass(frozen=True)
+class DippedJoint:
+    """V-shaped dip of total angle ``angle`` [rad] at ``x_joint`` [m] (Jenkins et al. 1974).
+
+    The surface falls with slope angle/2 over JOINT_RAMP before the joint and rises
+    with the same slope after it; the wheel's heading changes by ``angle`` at the
+    joint.
+    """
+
+    x_joint: float
+    angle: float
+
+    def heights(self, x: float) -> tuple[float, float]:
+        d = abs(x - self.x_joint)
+        return (-0.5 * self.angle * (JOINT_RAMP - d) if d < JOINT_RAMP else 0.0), NO_SURFACE
+
+
+def hertz(w: float, z_wheel: float, surfaces: tuple[float, float], c_h: float = HERTZ_CONSTANT
+          ) -> tuple[float, float, float, float]:
+    """Contact force of one wheel on its (up to two) surfaces.
+
+    Parameters
+    ----------
+    w : float
+        Rail deflection under the wheel [m] (up +).
+    z_wheel : float
+        Wheel vertical position [m] (up +).
+    surfaces : (float, float)
+        Surface heights [m] (:data:`NO_SURFACE` where absent).
+    c_h : float
+        Hertz constant [N/m^1.5].
+
+    Returns
+    -------
+    F : float
+        Total contact force on the wheel [N] (up +, >= 0).
+    dF_dw : float
+        Derivative with respect to the rail deflection [N/m].
+    F1, F2 : float
+        Force on each surface [N].
+    """
+    d1 = surfaces[0] + w - z_wheel
+    d2 = surfaces[1] + w - z_wheel
+    F1 = F2 = k = 0.0
+    if d1 > 0.0:
+        s = np.sqrt(d1)
+        F1 = c_h * d1 * s
+        k += 1.5 * c_h * s
+    if d2 > 0.0:
+        s = np.sqrt(d2)
+        F2 = c_h * d2 * s
+        k += 1.5 * c_h * s
+    return F1 + F2, k, F1, F2
+
+
+def hertz_deflection(F: float, c_h: float = HERTZ_CONSTANT) -> float:
+    """Contact compression delta [m] under a force F [N] (inverse of Hertz)."""
+    return (max(F, 0.0) / c_h) ** (2.0 / 3.0)
