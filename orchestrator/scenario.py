@@ -637,6 +637,9 @@ def _build_schema() -> _Map:
             "element_length": _Field(pos, R["element_length"], "[m] max FE element length"),
         }), _SUB),
         "structural_damping": _Field(nonneg, T["structural_damping"], "[s] stiffness-proportional Rayleigh beta"),
+        "dipped_joint": _Field(_Num(ge=0, le=MAX_IMPACT_ANGLE, unit=" rad"), T["dipped_joint"],
+                               "[rad] plain track only: total angle of a V-shaped dipped joint at mid-panel on "
+                               "the left rail (the Jenkins P2 verification case)"),
     }, post=_post_track)
 
     vehicle = _Map({
@@ -977,6 +980,7 @@ def _build(raw: dict, source: str) -> Scenario:
         reduction=ReductionParams(**t["reduction"]),
         impact_angle=t["crossing"]["impact_angle"],
         structural_damping=t["structural_damping"],
+        dipped_joint=t["dipped_joint"],
     )
     vehicle = VehicleSpec(fmu=v["fmu"], speed=v["speed"], axle_load=v["axle_load"],
                           ports=tuple(PortMap(**p) for p in v["ports"]),

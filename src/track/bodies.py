@@ -6,6 +6,7 @@ with dofs ``[w0, th0, w1, th1, ...]``.
 """
 from __future__ import annotations
 
+from bisect import bisect_right
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,19 +80,31 @@ class BeamBody:
             raise ValueError(f"{self.name}: no node at s = {s:.6f} m")
         return i
 
-    def shape_row(self, s: float) -> tuple[np.ndarray, np.ndarray]:
-        """Deflection at ``s`` as weights on full dofs.
+    def shape_row(self, s: float) -> tuple[int, np.ndarray]:
+        """Deflection at ``s`` as weights on the dofs of one element.
 
         Returns
         -------
-        dofs : ndarray of int, shape (4,)
+        e : int
+            Element index; its dofs are ``2e .. 2e+3``.
         weights : ndarray, shape (4,)
-            ``w(s) = weights @ u[dofs]``.
+            ``w(s) = weights @ u[2e:2e+4]``.
         """
-        e = int(np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.s.size - 2))
-        L = self.s[e + 1] - self.s[e]
-        xi = np.clip((s - self.s[e]) / L, 0.0, 1.0)
-        return np.arange(2 * e, 2 * e + 4), deflection_shape(xi, L, self.phi[e])[0]
+        sl = self._s_list
+        e = min(max(bisect_right(sl, s) - 1, 0), len(sl) - 2)
+        L = sl[e + 1] - sl[e]
+        xi = min(max((s - sl[e]) / L, 0.0), 1.0)
+        phi = self._phi_list[e]
+        x2, x3 = xi * xi, xi * xi * xi
+        c = 1.0 / (1.0 + phi)
+        return e, np.array([c * (2 * x3 - 3 * x2 - phi * xi + 1 + phi),
+                            c * L * (x3 - (2 + phi / 2) * x2 + (1 + phi / 2) * xi),
+                            c * (-2 * x3 + 3 * x2 + phi * xi),
+                            c * L * (x3 - (1 - phi / 2) * x2 - (phi / 2) * xi)])
+
+    def __post_init__(self):
+        self._s_list = self.s.tolist()
+        self._phi_list = self.phi.tolist()
 
     def element_moments(self, u: np.ndarray) -> np.ndarray:
         """Bending moments at both ends of every element [N m], shape (..., n-1, 2).

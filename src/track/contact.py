@@ -22,6 +22,7 @@ geometry can be given as a table of (x, z_wing, z_nose) instead.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import sqrt
 
 import numpy as np
 
@@ -127,11 +128,11 @@ def hertz(w: float, z_wheel: float, surfaces: tuple[float, float], c_h: float = 
     d2 = surfaces[1] + w - z_wheel
     F1 = F2 = k = 0.0
     if d1 > 0.0:
-        s = np.sqrt(d1)
+        s = sqrt(d1)
         F1 = c_h * d1 * s
         k += 1.5 * c_h * s
     if d2 > 0.0:
-        s = np.sqrt(d2)
+        s = sqrt(d2)
         F2 = c_h * d2 * s
         k += 1.5 * c_h * s
     return F1 + F2, k, F1, F2

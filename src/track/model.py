@@ -151,10 +151,10 @@ class TrackModel:
     _index: dict = field(default_factory=dict, repr=False)
 
     def body(self, name: str) -> Body:
-        try:
-            return self.bodies[self._index[name]]
-        except KeyError:
-            raise KeyError(f"no body named {name!r}") from None
+        k = self._index.get(name)
+        if k is None:
+            raise KeyError(f"no body named {name!r}")
+        return self.bodies[k]
 
     def sleeper(self, index: int) -> Body:
         return self.body(f"sleeper_{index}")
@@ -165,13 +165,11 @@ class TrackModel:
         ``coord`` is x [m] for rails and y [m] for sleepers; it is clipped to the body.
         """
         b = self.body(body)
-        s = float(np.clip(b.local(coord), 0.0, b.fom.s[-1]))
-        dofs, w = b.fom.shape_row(s)
-        e = dofs[0] // 2
+        e, w = b.fom.shape_row(coord - b.origin)
         R = b.residual_blocks.get(e)
         if R is None:  # the 4x4 residual flexibility of this element, computed once
-            R = b.residual_blocks[e] = element_residual(b.rom, dofs)
-        return PointMap(body, coord, b.gdofs, w @ b.rom.T[dofs, :], float(w @ R @ w), e, w)
+            R = b.residual_blocks[e] = element_residual(b.rom, np.arange(2 * e, 2 * e + 4))
+        return PointMap(body, coord, b.gdofs, w @ b.rom.T[2 * e:2 * e + 4, :], float(w @ R @ w), e, w)
 
     def rail_point(self, side: str, x: float) -> PointMap:
         """Map of the running rail under a wheel on ``side`` at track coordinate x [m]."""
@@ -189,10 +187,9 @@ class TrackModel:
         for pm, F in loads:
             if pm.body != body:
                 continue
-            s = float(np.clip(b.local(pm.coord), 0.0, b.fom.s[-1]))
-            dofs, w = b.fom.shape_row(s)
+            e, w = b.fom.shape_row(b.local(pm.coord))
             f = np.zeros(b.fom.ndof)
-            f[dofs] = w
+            f[2 * e:2 * e + 4] = w
             u = u + np.multiply.outer(np.asarray(F, float), static_correction(b.rom, f))
         return u
 
