@@ -77,7 +77,29 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_args(run)
     run.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>)")
     run.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+    run.add_argument("--backend", choices=("fmu", "inprocess"), default="fmu",
+                     help="fmu: the track and vehicle FMUs through FMPy (default); inprocess: the same "
+                          "model objects without the FMU boundary")
     run.set_defaults(handler=_cmd_run)
+
+    bld = sub.add_parser("build-fmus", help="build track.fmu, bogie.fmu and quarter.fmu",
+                         description="Build the track FMU of SCENARIO (default: the default scenario) and "
+                                     "the vehicle FMUs into DIR.")
+    bld.add_argument("scenario", metavar="SCENARIO", type=Path, nargs="?",
+                     help="scenario YAML whose track the track FMU carries (default: "
+                          "scenarios/crossing_1_12_through_120.yaml)")
+    bld.add_argument("--set", metavar="KEY=VALUE", action="append", default=[], dest="overrides",
+                     help="override a scenario value (repeatable)")
+    bld.add_argument("--out", metavar="DIR", type=Path, default=Path("fmus_built"),
+                     help="output folder (default: fmus_built)")
+    bld.set_defaults(handler=_cmd_build_fmus)
+
+    ssp = sub.add_parser("export-ssp", help="write the co-simulation system as an SSP file",
+                         description="Write SCENARIO's system (track and vehicle FMUs, connections, "
+                                     "parameters) as an SSP 1.0 file for other FMI tools (libcosim, FMPy).")
+    _add_scenario_args(ssp)
+    ssp.add_argument("--out", metavar="FILE.ssp", type=Path, required=True, help="SSP file to write")
+    ssp.set_defaults(handler=_cmd_export_ssp)
 
     frf = sub.add_parser("frf", help="receptance (frequency response) of the track",
                          description="Receptance of the track of SCENARIO at one rail point; "
@@ -103,8 +125,31 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     scenario = load_scenario(args.scenario, overrides=args.overrides)
     out_dir = args.out if args.out is not None else RESULTS_DIR / scenario.name
-    _jobs().run_scenario(scenario, out_dir, progress=not args.no_progress)
+    _jobs().run_scenario(scenario, out_dir, progress=not args.no_progress, backend=args.backend)
     print(f"{PROG}: results in {out_dir}")
+    return 0
+
+
+DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "crossing_1_12_through_120.yaml"
+
+
+def _cmd_build_fmus(args: argparse.Namespace) -> int:
+    from .scenario import load_scenario
+
+    path = args.scenario if args.scenario is not None else DEFAULT_SCENARIO
+    scenario = load_scenario(path, overrides=args.overrides)
+    built = importlib.import_module("orchestrator.build_job").build_fmus(scenario, args.out)
+    for name, p in built.items():
+        print(f"{PROG}: {name}: {p}")
+    return 0
+
+
+def _cmd_export_ssp(args: argparse.Namespace) -> int:
+    from .scenario import load_scenario
+
+    scenario = load_scenario(args.scenario, overrides=args.overrides)
+    out = importlib.import_module("orchestrator.ssp").export_ssp(scenario, args.out)
+    print(f"{PROG}: system written to {out}")
     return 0
 
 

@@ -1,10 +1,9 @@
 """Jobs behind the command line: each takes a loaded Scenario and an output folder.
 
-``run_scenario`` is, until the vehicle co-simulation lands, a *track-only* run: the
-vehicle's static wheel loads move at the scenario speed over the reduced track
-(from static equilibrium), and the job writes the signals, the bending-moment
-envelopes, the static deflection lines at the crossing transition and the
-receptance there.
+``run_scenario`` runs the co-simulation (:mod:`orchestrator.master`) and
+post-processes the recorded track states with the same track model: contact
+forces, wheel and rail displacements, bending-moment envelopes along the crossing
+rail and the transition sleeper, the instants of maximum moment, ballast pressure.
 """
 from __future__ import annotations
 
@@ -15,12 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from track.dynamics import simulate_moving_loads
 from track.frf import receptance
 from track.model import TrackModel, build_track
 from track.post import body_response, sleeper_pressure
 from track.statics import static_equilibrium
-from track.wheels import static_wheel_loads, wheel_offsets
 
 from . import plots
 from .errors import UserInputError
@@ -28,7 +25,6 @@ from .plots_layout import plot_layout
 
 FRF_POINTS = 400          # frequencies of a receptance curve
 FRF_FMIN = 5.0            # Hz
-MARGIN_SLEEPERS = 2       # wheels stay this many sleepers inside the panel ends
 
 
 def _reference(model: TrackModel) -> tuple[str, float, int]:
@@ -40,14 +36,6 @@ def _reference(model: TrackModel) -> tuple[str, float, int]:
         return lay.crossing_side, lay.x_transition, k
     k = len(lay.sleepers) // 2
     return "left", lay.sleepers[k].x, k
-
-
-def _check_vehicle(scenario) -> str:
-    kind = scenario.vehicle.fmu
-    if kind not in ("bogie", "quarter"):
-        raise UserInputError(f"vehicle.fmu: {kind!r}: third-party vehicle FMUs need the co-simulation, "
-                             "which this version does not have yet; use 'bogie' or 'quarter'")
-    return kind
 
 
 def _progress_bar(enabled: bool, total: int, desc: str):
@@ -64,130 +52,128 @@ def _progress_bar(enabled: bool, total: int, desc: str):
     return update, bar.close
 
 
-def run_scenario(scenario, out_dir: Path, progress: bool = True) -> dict:
-    """Track-only run of ``scenario``; writes sensors.csv, results.h5, summary.json, plots.
+def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = "fmu") -> dict:
+    """Co-simulation of ``scenario``; writes sensors.csv, results.h5, summary.json and plots.
 
-    Returns the summary dict (also written as summary.json).
+    Returns the summary dict (also written as summary.json). If the run stops early
+    (divergence, a failing FMU) everything computed so far is written first and a
+    :class:`UserInputError` names the cause.
     """
+    from .master import run_cosim
+
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    kind = _check_vehicle(scenario)
-    veh, sim = scenario.vehicle, scenario.simulation
-    model = build_track(scenario.track)
-    lay = model.layout
-    side, x_ref, k_tr = _reference(model)
-    spacing = lay.params.sleeper_spacing
-    offsets = wheel_offsets(kind)
-    x_first, x_last = lay.sleepers[0].x, lay.sleepers[-1].x
-    x_front = sim.x_start if sim.x_start is not None else x_first - min(offsets) + MARGIN_SLEEPERS * spacing
-    x_end = x_last - MARGIN_SLEEPERS * spacing
-    duration = min(sim.duration, (x_end - x_front) / veh.speed)
-    if duration <= 0:
-        raise UserInputError(f"simulation.x_start: {x_front:.3f} m leaves no room in the panel "
-                             f"(wheels must stay within {x_first:.2f}..{x_end:.2f} m)")
-    h = sim.step
-    every = max(1, int(round(sim.output_step / h)))
-    loads = static_wheel_loads(kind, veh.axle_load, x_front)
-
-    # static deflection lines with the front wheelset over the crossing transition
-    static_loads = [(model.rail_point(ld.side, x_ref + (ld.x0 - x_front)), ld.force) for ld in loads]
-    st = static_equilibrium(model, static_loads)
-    rail_name = lay.running_body(side, x_ref)
-    sl_name = f"sleeper_{k_tr}"
-
-    nsteps = int(round(duration / h))
-    update, close = _progress_bar(progress, nsteps, "track run")
+    sim = scenario.simulation
+    nsteps = int(round(sim.duration / sim.step))
+    update, close = _progress_bar(progress, nsteps, "co-simulation")
     try:
-        res = simulate_moving_loads(model, loads, veh.speed, duration, h, every, progress=update)
+        res = run_cosim(scenario, backend=backend, work_dir=out_dir / "work", progress=update)
     finally:
         close()
-
-    # ---- post-processing
-    Fw = np.array([ld.force for ld in loads])
-    wheel_points = [[(model.rail_point(ld.side, x), ld.force) for ld, x in zip(loads, xs)] for xs in res.x]
-    rail_hist = np.array([body_response(model, rail_name, q, pts).moment for q, pts in zip(res.q, wheel_points)])
-    rail_coord = model.body(rail_name).coords()
-    sl_resp = body_response(model, sl_name, res.q)
-    y_p, p_t = sleeper_pressure(model, k_tr, res.q, res.v)
-    seat_y = [y for sl, y in zip(model.pads.sleeper, model.pads.y) if sl == k_tr]
-    w_seat = np.array([body_response(model, sl_name, res.q).w[:, np.argmin(np.abs(model.body(sl_name).coords() - y))]
-                       for y in seat_y]).T
-
-    # ---- files: signals first (nothing computed is lost if a later step fails)
-    cols = {"time": res.t}
-    for i in range(len(loads)):
-        cols[f"wheel{i + 1}_rail_w"] = res.w[:, i]
-    for j, y in enumerate(seat_y):
-        cols[f"{sl_name}_w_seat{j + 1}"] = w_seat[:, j]
-    for j in range(y_p.size):
-        cols[f"{sl_name}_p{j + 1}"] = p_t[:, j]
-    header = ",".join(cols)
-    np.savetxt(out_dir / "sensors.csv", np.column_stack(list(cols.values())), delimiter=",",
-               header=header, comments="", fmt="%.9g")
-    _write_h5(out_dir / "results.h5", model, res, Fw, rail_name, rail_coord, rail_hist, sl_name, sl_resp)
-
+    model = build_track(scenario.track)  # the same model (cached bodies) for post-processing
+    side, x_ref, k_tr = _reference(model)
+    lay = model.layout
     summary = {
-        "scenario": scenario.name,
-        "kind": "track-only (moving static wheel loads; vehicle co-simulation not yet available)",
-        "vehicle": kind, "speed": veh.speed, "axle_load": veh.axle_load,
-        "duration": float(res.t[-1]), "step": h, "x_front_start": x_front,
+        "scenario": scenario.name, "backend": backend, "algorithm": sim.algorithm,
+        "vehicle": scenario.vehicle.fmu, "speed": scenario.vehicle.speed, "axle_load": scenario.vehicle.axle_load,
+        "duration": float(res.t[-1]), "step": sim.step, "steps": res.stats["steps"],
         "dofs": {"reduced": model.n, "full": model.stats.fom_dofs, "bodies": model.stats.bodies},
-        "build_seconds": {"mesh_assembly": model.stats.t_mesh_assembly, "reduction": model.stats.t_reduction,
-                          "global": model.stats.t_global},
-        "static": {"residual": st.residual, "iterations": st.iterations,
-                   "rail_w_at_transition": float(static_loads[0][0].value(st.q, static_loads[0][1]))},
-        "counters": vars(res.counters),
-        "crossing_rail": rail_name, "transition_sleeper": k_tr,
-        "max_rail_moment": float(rail_hist.max()), "min_rail_moment": float(rail_hist.min()),
-        "max_sleeper_moment": float(sl_resp.moment.max()), "min_sleeper_moment": float(sl_resp.moment.min()),
-        "max_ballast_pressure_transition": float(p_t.max()),
-        "wall_seconds": None, "machine": f"{platform.machine()} {platform.system()} py{platform.python_version()}",
-        "error": res.error,
+        "wall_seconds": res.stats, "error": res.error,
     }
-
-    # ---- plots
+    # ---- signals first: nothing computed is lost if a later step fails
+    _write_signals(out_dir, res)
+    wheels = range(res.Fz.shape[1])
+    Q0 = 0.5 * scenario.vehicle.axle_load
+    summary["contact"] = {f"wheel{i + 1}": {"max_Fz": float(np.nanmax(res.Fz[:, i])),
+                                            "min_Fz": float(np.nanmin(res.Fz[:, i])),
+                                            "delta_Q": float(np.nanmax(res.Fz[:, i]) - Q0)} for i in wheels}
+    crossing_wheels = [i for i in wheels if (i % 2 == 0) == (side == "left")]
+    summary["crossing_side"] = side
+    summary["max_delta_Q_crossing_side"] = max(summary["contact"][f"wheel{i + 1}"]["delta_Q"]
+                                               for i in crossing_wheels)
+    if res.track_record is not None and len(res.track_record.get("t", ())):
+        rec = res.track_record
+        rail_name = lay.running_body(side, x_ref)
+        sl_name = f"sleeper_{k_tr}"
+        loads_t = [[(model.rail_point(s, x), -f) for s, x, f in zip(_sides(len(xs)), xs, fz)]
+                   for xs, fz in zip(rec["x"], rec["Fz"])]
+        rail_hist = np.array([body_response(model, rail_name, q, pts).moment for q, pts in zip(rec["q"], loads_t)])
+        sl_resp = body_response(model, sl_name, rec["q"])
+        y_p, p_t = sleeper_pressure(model, k_tr, rec["q"], rec["v"])
+        j_r, j_s = int(np.argmax(rail_hist.max(axis=1))), int(np.argmax(sl_resp.moment.max(axis=1)))
+        summary.update({
+            "crossing_rail": rail_name, "transition_sleeper": k_tr,
+            "max_rail_moment": float(rail_hist.max()), "time_max_rail_moment": float(rec["t"][j_r]),
+            "max_sleeper_moment": float(sl_resp.moment.max()), "time_max_sleeper_moment": float(rec["t"][j_s]),
+            "max_ballast_pressure_transition": float(p_t.max()),
+        })
+        _write_h5(out_dir / "results.h5", res, rail_name, model.body(rail_name).coords(), rail_hist, sl_name,
+                  sl_resp, y_p, p_t)
+        env_r = np.stack([rail_hist.min(axis=0), rail_hist.max(axis=0)])
+        env_s = np.stack([sl_resp.moment.min(axis=0), sl_resp.moment.max(axis=0)])
+        plots.save(plots.plot_envelopes(model.body(rail_name).coords(), env_r, sl_resp.coord, env_s, y_p,
+                                        p_t.max(axis=0), rail_name, sl_name), out_dir / "envelopes.png")
+        inst_r = {f"t = {rec['t'][j_r]:.4f} s (max rail moment)":
+                  body_response(model, rail_name, rec["q"][j_r], loads_t[j_r])}
+        inst_s = {f"t = {rec['t'][j_s]:.4f} s (max sleeper moment)": body_response(model, sl_name, rec["q"][j_s])}
+        seat_y = sorted({float(y) for sl, y in zip(model.pads.sleeper, model.pads.y) if sl == k_tr})
+        plots.save(plots.plot_body_lines(inst_r, inst_s, f"{scenario.name}: instants of maximum moment",
+                                         rail_name, f"{sl_name} (crossing transition)",
+                                         marks_rail=[x_ref], marks_sleeper=seat_y), out_dir / "moments.png")
+    else:
+        _write_h5(out_dir / "results.h5", res)
     plots.save(plot_layout(lay), out_dir / "layout.png")
-    static_rail = {"static, front wheelset at transition": body_response(model, rail_name, st.q, static_loads)}
-    static_sl = {"static": body_response(model, sl_name, st.q)}
-    wheel_y = sorted({y for y in seat_y})
-    plots.save(plots.plot_body_lines(static_rail, static_sl, f"{scenario.name}: static equilibrium",
-                                     f"{rail_name} (rail under the {side} wheels)", f"{sl_name} (transition)",
-                                     marks_rail=[x_ref], marks_sleeper=wheel_y), out_dir / "static.png")
-    env_r = np.stack([rail_hist.min(axis=0), rail_hist.max(axis=0)])
-    env_s = np.stack([sl_resp.moment.min(axis=0), sl_resp.moment.max(axis=0)])
-    plots.save(plots.plot_envelopes(rail_coord, env_r, sl_resp.coord, env_s, y_p, p_t.max(axis=0),
-                                    rail_name, sl_name), out_dir / "envelopes.png")
-    plots.save(plots.plot_time_series(res.t, {f"wheel {i + 1}": 1e3 * res.w[:, i] for i in range(len(loads))},
-                                      "rail displacement under wheel [mm]", scenario.name),
-               out_dir / "wheel_displacement.png")
-    f = np.linspace(FRF_FMIN, scenario.track.reduction.f_cut, FRF_POINTS)
-    H = receptance(model, model.point(rail_name, x_ref), f, res.q_static)
-    _write_frf(out_dir, f, H, f"{rail_name}:{x_ref:.3f}")
-    summary["wall_seconds"] = time.perf_counter() - t_start
+    plots.save(plots.plot_time_series(res.t, {f"wheel {i + 1}": 1e-3 * res.Fz[:, i] for i in wheels},
+                                      "contact force [kN]", f"{scenario.name}: wheel-rail contact forces"),
+               out_dir / "contact_forces.png")
+    series = {f"wheel {i + 1}": 1e3 * res.z[:, i] for i in wheels}
+    series.update({f"rail under wheel {i + 1}": 1e3 * res.rail_z[:, i] for i in wheels})
+    plots.save(plots.plot_time_series(res.t, series, "vertical displacement [mm]",
+                                      f"{scenario.name}: wheel and rail displacement"), out_dir / "displacements.png")
+    summary["wall_seconds"]["job_total"] = time.perf_counter() - t_start
+    summary["machine"] = f"{platform.machine()} {platform.system()} py{platform.python_version()}"
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     if res.error:
         raise UserInputError(f"{res.error} (results up to t = {res.t[-1]:.4g} s written to {out_dir})")
     return summary
 
 
-def _write_h5(path, model, res, Fw, rail_name, rail_coord, rail_hist, sl_name, sl_resp) -> None:
+def _sides(m: int) -> list[str]:
+    return ["left" if i % 2 == 0 else "right" for i in range(m)]
+
+
+def _write_signals(out_dir: Path, res) -> None:
+    """sensors.csv: time and the monitoring signals of every wheel (SI units)."""
+    cols = {"time": res.t}
+    for i in range(res.Fz.shape[1]):
+        n = i + 1
+        cols[f"wheel{n}_Fz"] = res.Fz[:, i]
+        cols[f"wheel{n}_Fz_rail"] = res.parts[:, i, 0]
+        cols[f"wheel{n}_Fz_nose"] = res.parts[:, i, 1]
+        cols[f"wheel{n}_z"] = res.z[:, i]
+        cols[f"wheel{n}_rail_z"] = res.rail_z[:, i]
+        cols[f"wheel{n}_x"] = res.x[:, i]
+    np.savetxt(out_dir / "sensors.csv", np.column_stack(list(cols.values())), delimiter=",",
+               header=",".join(cols), comments="", fmt="%.9g")
+
+
+def _write_h5(path, res, rail_name=None, rail_coord=None, rail_hist=None, sl_name=None, sl_resp=None,
+              y_p=None, p_t=None) -> None:
     import h5py
     with h5py.File(path, "w") as f:
-        f.attrs["description"] = "track-only run: generalized coordinates and derived quantities, SI units"
-        f["t"] = res.t
-        f["q"] = res.q
-        f["q_static"] = res.q_static
-        f["wheel_x"] = res.x
-        f["wheel_rail_w"] = res.w
-        f["wheel_force"] = Fw
-        g = f.create_group(f"bodies/{rail_name}")
-        g["coord"] = rail_coord
-        g["moment"] = rail_hist
-        g = f.create_group(f"bodies/{sl_name}")
-        g["coord"] = sl_resp.coord
-        g["moment"] = sl_resp.moment
-        g["w"] = sl_resp.w
+        f.attrs["description"] = "co-simulation signals (SI units, z up +) and track post-processing"
+        for k in ("t", "x", "z", "vz", "Fz", "parts", "rail_z"):
+            f[f"signals/{k}"] = getattr(res, k)
+        if res.track_record is not None:
+            for k, v in res.track_record.items():
+                f[f"track/{k}"] = v
+        if rail_name is not None:
+            g = f.create_group(f"bodies/{rail_name}")
+            g["coord"], g["moment"] = rail_coord, rail_hist
+            g = f.create_group(f"bodies/{sl_name}")
+            g["coord"], g["moment"], g["w"] = sl_resp.coord, sl_resp.moment, sl_resp.w
+            g["ballast_y"], g["ballast_pressure"] = y_p, p_t
 
 
 def _write_frf(out_dir: Path, f: np.ndarray, H: np.ndarray, label: str) -> None:
