@@ -44,24 +44,45 @@ class CosimError(UserInputError):
 
 # ----------------------------------------------------------------------------- units
 class InProcessVehicle:
-    """Our bogie / quarter vehicle stepped directly (no FMU boundary)."""
+    """Our bogie / quarter vehicle stepped directly (no FMU boundary).
 
-    def __init__(self, kind: str, speed: float, axle_load: float, x0: float):
+    ``start_values`` set fields of the parameter dataclass (as the FMU's parameters
+    of the same names do).
+    """
+
+    def __init__(self, kind: str, speed: float, axle_load: float, x0: float, start_values: dict | None = None,
+                 hold: str = "zoh"):
+        import dataclasses
+
         from vehicle.bogie import BogieParams, bogie
         from vehicle.quarter import QuarterParams, quarter_vehicle
         from vehicle.stepper import VehicleStepper
 
-        self.model = bogie(BogieParams(axle_load=axle_load)) if kind == "bogie" else \
-            quarter_vehicle(QuarterParams(axle_load=axle_load))
+        cls, build = (BogieParams, bogie) if kind == "bogie" else (QuarterParams, quarter_vehicle)
+        names = {f.name for f in dataclasses.fields(cls)}
+        extra = dict(start_values or {})
+        unknown = sorted(set(extra) - names)
+        if unknown:
+            raise UserInputError(f"vehicle.start_values: {unknown[0]!r} is not a parameter of the {kind} "
+                                 f"(have: {', '.join(sorted(names))})")
+        self.model = build(cls(**{"axle_load": axle_load, **extra}))
         self.n = self.model.n_wheels
         self.speed, self.x0 = speed, x0
         st = self.model.static_state(np.zeros(self.n))
         self._stepper_cls, self._q0, self.Fz0 = VehicleStepper, st.q, st.Fz
+        self.hold = hold
         self.stepper = None
         self.t = 0.0
 
     def initialize(self, h: float) -> None:
-        self.stepper = self._stepper_cls(self.model, h, q0=self._q0, Fz0=self.Fz0)
+        self.stepper = self._stepper_cls(self.model, h, hold=self.hold, q0=self._q0, Fz0=self.Fz0)
+
+    def get_state(self):
+        return self.stepper.get_state(), self.t
+
+    def set_state(self, s) -> None:
+        self.stepper.set_state(s[0])
+        self.t = s[1]
 
     def step(self, t: float, h: float, Fz: np.ndarray) -> None:
         self.stepper.step(Fz)
@@ -95,6 +116,12 @@ class InProcessTrack:
 
     def record(self) -> dict:
         return self.engine.record.arrays()
+
+    def get_state(self):
+        return self.engine.get_state()
+
+    def set_state(self, s) -> None:
+        self.engine.set_state(s)
 
     def terminate(self) -> None:
         pass
@@ -284,9 +311,36 @@ def _jacobi(vehicle, track, t: float, h: float, Fz: np.ndarray) -> None:
     track.step(t, h, x, z, vz)
 
 
-ALGORITHMS: dict[str, Callable] = {"gauss-seidel": _gauss_seidel, "jacobi": _jacobi}
+IMPLICIT_TOL = 1e-3     # N: the monolithic reference iterates a step until Fz changes less
+IMPLICIT_MAX_ITER = 50
+
+
+def _implicit(vehicle, track, t: float, h: float, Fz: np.ndarray) -> None:
+    """Monolithic reference: the step is repeated until the coupling forces converge.
+
+    Vehicle with first-order hold of Fz over the step (so Fz(t_{k+1}) acts at the end
+    of the step, as in the track), track with the end-of-step wheel motion: the
+    converged step solves vehicle, contact and track simultaneously at t_{k+1}.
+    In-process only (needs state save/restore of both units).
+    """
+    sv, st = vehicle.get_state(), track.get_state()
+    guess = np.array(Fz, float)
+    for _ in range(IMPLICIT_MAX_ITER):
+        vehicle.step(t, h, guess)
+        x, z, vz = vehicle.outputs()
+        track.step(t, h, x, z, vz)
+        new = track.outputs()[0]
+        if np.max(np.abs(new - guess)) <= IMPLICIT_TOL:
+            return
+        guess = new.copy()
+        vehicle.set_state(sv)
+        track.set_state(st)
+    raise CosimError(f"the monolithic step at t = {t:.6g} s did not converge in {IMPLICIT_MAX_ITER} iterations")
+
+
+ALGORITHMS: dict[str, Callable] = {"gauss-seidel": _gauss_seidel, "jacobi": _jacobi, "implicit": _implicit}
 # Does the track receive start-of-step inputs (and so extrapolate when asked)?
-INPUTS_AT_START = {"gauss-seidel": False, "jacobi": True}
+INPUTS_AT_START = {"gauss-seidel": False, "jacobi": True, "implicit": False}
 
 
 # ----------------------------------------------------------------------------- run
@@ -365,21 +419,23 @@ def our_ports(n: int) -> list[Port]:
     return [Port(f"wheel{i}_x", f"wheel{i}_z", f"wheel{i}_vz", f"wheel{i}_Fz") for i in range(1, n + 1)]
 
 
-def make_units(scenario, backend: str, h: float, record_every: int, fmu_dir: Path | None, work_dir: Path,
-               layout):
+def make_units(scenario, backend: str, algorithm: str, h: float, record_every: int, fmu_dir: Path | None,
+               work_dir: Path, layout):
     """Vehicle and track units for a backend; returns (vehicle, track, x_front)."""
     sim, veh = scenario.simulation, scenario.vehicle
     kind = vehicle_kind(scenario)
     m = n_wheels(scenario)
     x0 = start_position(scenario, layout)
     check_passage(scenario, layout, x0)
-    at_start = INPUTS_AT_START[sim.algorithm]
-    extrapolate = at_start and sim.extrapolation
+    extrapolate = INPUTS_AT_START[algorithm] and sim.extrapolation
     if backend == "inprocess":
         if kind == "external":
             raise UserInputError("vehicle.fmu: a third-party FMU needs the fmu backend")
-        return (InProcessVehicle(kind, veh.speed, veh.axle_load, x0),
+        hold = "foh" if algorithm == "implicit" else "zoh"
+        return (InProcessVehicle(kind, veh.speed, veh.axle_load, x0, veh.start_values, hold),
                 InProcessTrack(scenario, m, h, extrapolate, record_every), x0)
+    if algorithm == "implicit":
+        raise UserInputError("the implicit (monolithic) reference runs in-process only")
     if backend != "fmu":
         raise UserInputError(f"backend {backend!r}: use 'fmu' or 'inprocess'")
     from .build_job import build_fmus
@@ -403,7 +459,8 @@ def make_units(scenario, backend: str, h: float, record_every: int, fmu_dir: Pat
 
 
 def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_dir: Path | None = None,
-              progress: Callable[[int, int], None] | None = None, record_states: bool = True) -> CosimResult:
+              progress: Callable[[int, int], None] | None = None, record_states: bool = True,
+              algorithm: str | None = None) -> CosimResult:
     """Run the co-simulation of ``scenario``.
 
     Parameters
@@ -419,6 +476,9 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
         ``progress(k, nsteps)`` at each output step.
     record_states : bool
         Record the track state (q, v) at the output times for post-processing.
+    algorithm : str, optional
+        Override ``simulation.algorithm``; ``"implicit"`` is the monolithic reference
+        (in-process only).
 
     Returns
     -------
@@ -439,10 +499,11 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
         work_dir = Path(tmp.name)
     work_dir = Path(work_dir)
     work_dir.mkdir(parents=True, exist_ok=True)
-    step_fn = ALGORITHMS[sim.algorithm]
+    algorithm = algorithm or sim.algorithm
+    step_fn = ALGORITHMS[algorithm]
     t_wall = time.perf_counter()
-    vehicle, track, x0 = make_units(scenario, backend, h, every if record_states else 0, fmu_dir, work_dir,
-                                    layout)
+    vehicle, track, x0 = make_units(scenario, backend, algorithm, h, every if record_states else 0, fmu_dir,
+                                    work_dir, layout)
     t_setup = time.perf_counter() - t_wall
     m = vehicle.n
     nout = nsteps // every + 1
@@ -496,7 +557,7 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
         elif getattr(track, "record_file", None) is not None and track.record_file.exists():
             with np.load(track.record_file) as d:
                 record = {k: d[k] for k in d.files}
-    stats = {"backend": backend, "algorithm": sim.algorithm, "step": h, "steps": min(nsteps, (done - 1) * every),
+    stats = {"backend": backend, "algorithm": algorithm, "step": h, "steps": min(nsteps, (done - 1) * every),
              "output_every": every, "wheels": m, "x_front_start": x0,
              "wall_setup": t_setup, "wall_loop": t_loop, "wall_total": time.perf_counter() - t_wall}
     if tmp is not None:

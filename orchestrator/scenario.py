@@ -639,7 +639,7 @@ def _build_schema() -> _Map:
         "structural_damping": _Field(nonneg, T["structural_damping"], "[s] stiffness-proportional Rayleigh beta"),
         "dipped_joint": _Field(_Num(ge=0, le=MAX_IMPACT_ANGLE, unit=" rad"), T["dipped_joint"],
                                "[rad] plain track only: total angle of a V-shaped dipped joint at mid-panel on "
-                               "the left rail (the Jenkins P2 verification case)"),
+                               "both rails (the Jenkins P2 verification case)"),
     }, post=_post_track)
 
     vehicle = _Map({

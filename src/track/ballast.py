@@ -4,16 +4,22 @@ Each bushing connects a sleeper dof (vertical displacement ``u``, up +) to the
 ground. With the gap ``g >= 0`` the compression is ``delta = -u - g``; the force on
 the sleeper (up +) is
 
-    F = max(0, k delta + c d(delta)/dt)   if delta > 0,   else 0,
+    F = max(0, k delta + c s(delta) d(delta)/dt)   if delta > 0,   else 0,
 
 so no force builds until the sleeper has moved down by the gap, and the bushing
-never pulls (seed 000 §2, Fig. 3).
+never pulls (seed 000 §2, Fig. 3). ``s(delta) = min(1, delta / DAMPING_ONSET)``
+lets the dashpot force grow over the first 10 um of compression instead of
+jumping to ``c v`` when a sleeper lands on the ballast: the force stays continuous,
+which the implicit time step needs to converge (a jump makes its iteration cycle
+between "open" and "closed"), and 10 um is 1-2 % of the static compression.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
+DAMPING_ONSET = 1e-5  # m: compression over which the dashpot force ramps in (see module doc)
 
 
 @dataclass
@@ -56,7 +62,7 @@ class Ballast:
         delta = -u - self.gap
         f = self.k * delta
         if v is not None:
-            f = f - self.c * v
+            f = f - self.c * v * np.clip(delta / DAMPING_ONSET, 0.0, 1.0)
         return np.where(delta > 0.0, np.maximum(f, 0.0), 0.0)
 
     def active(self, u: np.ndarray) -> np.ndarray:

@@ -120,7 +120,7 @@ class TrackCosim:
         if self.crossing is not None and side == self.model.layout.crossing_side and \
                 self.model.body(body).kind == "crossing":
             return self.crossing.heights(x)
-        if self.joint is not None and side == "left":
+        if self.joint is not None:
             return self.joint.heights(x)
         return FLAT.heights(x)
 

@@ -254,5 +254,39 @@ class TrackParams:
     ballast: BallastParams = field(default_factory=BallastParams)
     reduction: ReductionParams = field(default_factory=ReductionParams)
     impact_angle: float = 0.006  # crossing.impact_angle [rad]
-    dipped_joint: float = 0.0  # plain track only: total angle of a dipped joint mid-panel, left rail [rad]
+    dipped_joint: float = 0.0  # plain track only: total angle of a dipped joint mid-panel, both rails [rad]
     structural_damping: float = 0.0  # stiffness-proportional Rayleigh beta of the bodies [s]
+
+
+def track_params_from_dict(data: dict) -> TrackParams:
+    """Rebuild a :class:`TrackParams` from ``dataclasses.asdict(params)`` (e.g. read back from JSON).
+
+    The inverse of ``dataclasses.asdict`` for this dataclass tree: nested mappings
+    become the frozen dataclasses again and lists become tuples (pad overrides, voids
+    and their gaps), so ``track_params_from_dict(asdict(p)) == p``. Missing keys take
+    the dataclass defaults; unknown keys raise ``TypeError``.
+
+    Parameters
+    ----------
+    data : dict
+        Plain data with the field names of :class:`TrackParams` (SI units).
+
+    Returns
+    -------
+    TrackParams
+    """
+    d = dict(data)
+    if "layout" in d:
+        d["layout"] = LayoutParams(**d["layout"])
+    if "rail_pad" in d:
+        pad = dict(d["rail_pad"])
+        pad["overrides"] = tuple(PadOverride(**o) for o in pad.get("overrides", ()))
+        d["rail_pad"] = RailPadParams(**pad)
+    if "ballast" in d:
+        bal = dict(d["ballast"])
+        bal["voids"] = tuple(VoidSpec(int(v["sleeper"]), tuple(float(g) for g in v["gaps"]))
+                             for v in bal.get("voids", ()))
+        d["ballast"] = BallastParams(**bal)
+    if "reduction" in d:
+        d["reduction"] = ReductionParams(**d["reduction"])
+    return TrackParams(**d)
