@@ -1,4 +1,5 @@
-"""Build the project's FMUs with pythonfmu: ``build_fmu(kind, out_dir) -> Path``.
+"""Build the project's FMUs with pythonfmu: ``build_fmu(kind, out_dir) -> Path`` and
+``build_track_fmu(track_params, n_wheels, out_dir) -> Path``.
 
 pythonfmu FMUs execute in the host's Python interpreter and share its ``sys.modules``
 (a Python host such as FMPy, or our orchestrator, imports the FMU's modules next to
@@ -12,6 +13,7 @@ share one module.  So each FMU bundles its code as one package with a unique nam
                                   /base.py      copy of fmus/base.py
                                   /<module>.py  copy of the slave module, e.g. vehicle_fmus.py
                                   /<package>/   copy of src/<package>, e.g. vehicle/
+    resources/<data files>                      e.g. track_fmu.json: the baked track parameters
     resources/pythonfmu/                        added by pythonfmu
     binaries/linux64/<ClassName>.so             pythonfmu's C wrapper
 
@@ -19,6 +21,10 @@ Slave modules import ``.base`` relatively and their model package with
 ``from . import vehicle`` (falling back to ``import vehicle`` in the source tree);
 model packages use relative imports only.  The FMU needs numpy and scipy in the
 host's (or the embedded) Python.
+
+Data files (the track FMU's baked parameters) go into ``resources/`` next to the
+entry script; they do not enter the package hash, so track FMUs of different
+scenarios share one bundled package (and its in-process cache of reduced bodies).
 """
 from __future__ import annotations
 
@@ -29,7 +35,7 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Tuple
+from typing import Any, Callable, Dict, Mapping, Optional, Tuple
 
 FMUS_DIR = Path(__file__).resolve().parent
 SRC_DIR = FMUS_DIR.parent / "src"
@@ -47,11 +53,15 @@ class FmuKind:
         The slave class; also the FMU's modelName / modelIdentifier.
     packages : tuple of str
         Model packages from ``src/`` to bundle.
+    resources : callable, optional
+        ``resources() -> {file name: bytes}``: data files for ``resources/`` when the
+        kind is built by :func:`build_fmu` (the track FMU's default parameters).
     """
 
     module: str
     class_name: str
     packages: Tuple[str, ...]
+    resources: Optional[Callable[[], Dict[str, bytes]]] = None
 
 
 # The entry script.  pythonfmu 0.7's C wrapper (findClass in PySlaveInstance.cpp), at
@@ -65,15 +75,31 @@ globals().setdefault("_namespace_refs", []).append(globals())  # see fmus.build.
 from {package}.{module} import {class_name}
 '''
 
+TRACK_DEFAULT_WHEELS = 4  # build_fmu("track"): default track, wheels of the default vehicle (bogie)
+
+
+def _default_track_resources() -> Dict[str, bytes]:
+    from track.params import TrackParams
+
+    from .track_fmu import RESOURCE_FILE, resource_payload
+    return {RESOURCE_FILE: resource_payload(TrackParams(), TRACK_DEFAULT_WHEELS)}
+
+
 FMU_KINDS: Dict[str, FmuKind] = {
     "bogie": FmuKind("vehicle_fmus", "Bogie", ("vehicle",)),
     "quarter": FmuKind("vehicle_fmus", "QuarterVehicle", ("vehicle",)),
+    # build_track_fmu bakes a scenario's track; build_fmu("track") the default one
+    "track": FmuKind("track_fmu", "Track", ("track",), _default_track_resources),
 }
 
 
-def register_fmu_kind(kind: str, module: str, class_name: str, packages: Tuple[str, ...]) -> None:
-    """Make ``build_fmu(kind, ...)`` build another slave (e.g. the track FMU)."""
-    FMU_KINDS[kind] = FmuKind(module, class_name, tuple(packages))
+def register_fmu_kind(kind: str, module: str, class_name: str, packages: Tuple[str, ...],
+                      resources: Optional[Callable[[], Dict[str, bytes]]] = None) -> None:
+    """Make ``build_fmu(kind, ...)`` build another slave.
+
+    ``resources() -> {file name: bytes}`` optionally gives data files for ``resources/``.
+    """
+    FMU_KINDS[kind] = FmuKind(module, class_name, tuple(packages), resources)
 
 
 def _package_dir(package: str) -> Path:
@@ -105,7 +131,9 @@ def build_fmu(kind: str, out_dir: str | Path) -> Path:
     Parameters
     ----------
     kind : str
-        ``"bogie"`` or ``"quarter"`` (or a kind added with :func:`register_fmu_kind`).
+        ``"bogie"``, ``"quarter"``, ``"track"`` (the default track with 4 wheels; use
+        :func:`build_track_fmu` for a scenario's track) or a kind added with
+        :func:`register_fmu_kind`.
     out_dir : str or Path
         Destination directory (created if missing).
 
@@ -114,19 +142,55 @@ def build_fmu(kind: str, out_dir: str | Path) -> Path:
     Path
         The FMU file.
     """
-    from pythonfmu.builder import FmuBuilder  # optional dependency, only needed to build
-
     if kind not in FMU_KINDS:
         raise ValueError(f"unknown FMU kind {kind!r}; known: {', '.join(sorted(FMU_KINDS))}")
+    spec = FMU_KINDS[kind]
+    resources = spec.resources() if spec.resources is not None else {}
+    return _build(kind, Path(out_dir) / f"{kind}.fmu", resources)
+
+
+def build_track_fmu(track_params, n_wheels: int, out_dir: str | Path, name: str = "track",
+                    **defaults: Any) -> Path:
+    """Build a track FMU with ``track_params`` baked in, as ``out_dir/<name>.fmu``.
+
+    Parameters
+    ----------
+    track_params : track.params.TrackParams
+        The scenario's track section (stored as JSON in ``resources/track_fmu.json``;
+        the FMU parameters h1, h2, voids, impact angle, ... override it at run time).
+    n_wheels : int
+        Number of wheels (bogie 4, quarter vehicle 2).
+    out_dir : str or Path
+        Destination directory (created if missing).
+    name : str
+        File name of the FMU without ``.fmu``.
+    **defaults
+        Start values of the run parameters: ``speed`` [m/s], ``static_wheel_load``
+        [N], ``extrapolate``, ``auto_offset`` (bool), ``record_every`` (int); see
+        :data:`fmus.track_fmu.RUN_DEFAULTS`.
+
+    Returns
+    -------
+    Path
+        The FMU file.
+    """
+    from .track_fmu import RESOURCE_FILE, resource_payload
+
+    payload = resource_payload(track_params, n_wheels, **defaults)
+    return _build("track", Path(out_dir) / f"{name}.fmu", {RESOURCE_FILE: payload})
+
+
+def _build(kind: str, dest: Path, resources: Mapping[str, bytes]) -> Path:
+    """Bundle the code of ``kind`` under its unique package name and build ``dest``."""
+    from pythonfmu.builder import FmuBuilder  # optional dependency, only needed to build
+
     spec = FMU_KINDS[kind]
     files = _payload(spec)
     digest = hashlib.sha256(kind.encode())
     for rel, path in sorted(files.items()):
         digest.update(rel.encode() + b"\0" + path.read_bytes() + b"\0")
     package = f"xpanel_{kind}_{digest.hexdigest()[:12]}"
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    dest = out_dir / f"{kind}.fmu"
+    dest.parent.mkdir(parents=True, exist_ok=True)
 
     with tempfile.TemporaryDirectory(prefix="xpanel_fmu_") as tmp:
         stage = Path(tmp) / package
@@ -139,9 +203,14 @@ def build_fmu(kind: str, out_dir: str | Path) -> Path:
         script = Path(tmp) / f"{package}_slave.py"
         script.write_text(ENTRY_SCRIPT.format(kind=kind, package=package, module=spec.module,
                                               class_name=spec.class_name))
+        data_files = []
+        for file_name, content in resources.items():
+            target = Path(tmp) / file_name   # the builder's staging folder is the slave's resources
+            target.write_bytes(content)
+            data_files.append(target)
         path_before = list(sys.path)
         try:
-            FmuBuilder.build_FMU(script, dest=dest, project_files=[stage],
+            FmuBuilder.build_FMU(script, dest=dest, project_files=[stage, *data_files],
                                  canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         finally:
             # the builder imports the script from tmp and leaves it on sys.path and in

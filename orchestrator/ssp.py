@@ -30,11 +30,14 @@ by the sign and track -> vehicle multiplies by 1/sign = sign.
 
 Parameter values:
 
-* track: ``speed``, ``static_wheel_load = axle_load / 2``, ``extrapolate = true``
-  (the track extrapolates the wheel inputs over a step; in a Jacobi master such as
-  libcosim or FMPy the inputs are those of the previous communication point, so it is
-  needed there), ``h1`` (ballast stiffness scale), ``h2`` (rail-pad stiffness scale)
-  and ``impact_angle`` from the scenario (only those the track FMU declares).
+* track: ``speed``, ``static_wheel_load = axle_load / 2``, ``extrapolate =
+  simulation.extrapolation`` (true by default, and it should stay true: libcosim and
+  FMPy are Jacobi masters, the track's wheel inputs are those of the previous
+  communication point, and the stiff Hertz contact needs them extrapolated over the
+  step, DESIGN.md §8; false holds them, as ``turnout run`` with ``algorithm: jacobi``
+  and ``extrapolation: false`` does), ``h1`` (ballast stiffness scale), ``h2``
+  (rail-pad stiffness scale) and ``impact_angle`` from the scenario (only those the
+  track FMU declares).
 * our vehicles: ``speed``, ``axle_load``, ``x0`` (track coordinate of the front
   wheelset at t = 0: ``simulation.x_start`` if set, else :func:`default_x_start`:
   the position where the rearmost wheelset stands ``START_MARGIN_SLEEPERS`` (2) sleeper
@@ -43,6 +46,11 @@ Parameter values:
 * a third-party vehicle: ``vehicle.start_values`` only (its speed and start position
   are its own parameters, e.g. ``{"v": 33.333, "s0": 4.1}``; the track's ``speed`` is
   the scenario's ``vehicle.speed``).
+
+With our vehicles the run must keep the wheels on the modelled panel over
+``simulation.duration`` (the check of ``turnout run``, :func:`orchestrator.master.check_passage`);
+otherwise :class:`UserInputError`. A third-party vehicle's start position is its own
+parameter and is not checked.
 
 Default experiment: start 0, stop ``simulation.duration``, and the communication
 step ``simulation.step`` in the OSP annotation that libcosim reads
@@ -66,25 +74,30 @@ libcosim (Open Simulation Platform) through ``libcosimpy``
   initialization mode, ``fmi2ExitInitializationMode`` and one more transfer.
   Parameter values it cannot apply (unknown name, wrong causality) are skipped with a
   log warning only; :func:`write_ssp` therefore checks every name against the FMU.
-* pythonfmu FMUs: the C wrapper (``binaries/linux64/<Model>.so``) does not link
-  ``libpython`` (no ``DT_NEEDED``); its ``Py_*`` symbols are resolved from the process.
-  In a Python host (libcosimpy) they are there: this interpreter was built with
-  ``--enable-shared``, so ``libpython3.11.so`` is a dependency of the ``python``
-  executable and in the global symbol scope; a statically linked interpreter (e.g.
-  Debian's ``/usr/bin/python3``) exports the same symbols from the executable
-  (``-export-dynamic``), which works the same way. libcosim calls the FMUs from its
-  worker threads; the wrapper takes the GIL with ``PyGILState_Ensure`` and ctypes
-  releases it around each libcosimc call, so this works in-process. The FMU code runs in
-  the host's interpreter (its numpy/scipy).
-  A C host (the ``cosim`` command-line tool) has no Python: loading the FMU fails with
-  ``undefined symbol: Py...``. Workaround: ``LD_PRELOAD=/path/to/libpython3.11.so
-  cosim run file.ssp`` (the interpreter then starts inside the FMU and must find
-  numpy/scipy, e.g. via ``PYTHONPATH`` / ``PYTHONHOME`` of a venv). From a Python
-  process that embeds libcosim differently (or a Python whose libpython was loaded
-  with ``RTLD_LOCAL``), ``ctypes.CDLL(sysconfig libpython path, mode=ctypes.RTLD_GLOBAL)``
-  before loading the FMU makes the symbols global. Without any shared ``libpython``
-  (an interpreter built without ``--enable-shared`` *and* without exported symbols)
-  there is no workaround but another Python build.
+* pythonfmu FMUs load in-process. Their C wrapper (``binaries/linux64/<Model>.so``)
+  does not link ``libpython`` (no ``DT_NEEDED``): its ``Py_*`` symbols must already be
+  in the process's global scope. In a Python host they are, whether the interpreter
+  was built with ``--enable-shared`` (``libpython3.x.so`` is a dependency of the
+  executable: checked with pyenv's 3.11.7) or statically (the executable exports the
+  C API with ``-Xlinker -export-dynamic``: checked with Debian's ``/usr/bin/python3.11``
+  running this module's libcosim runner). libcosim calls the FMUs from its worker
+  threads; the wrapper takes the GIL with ``PyGILState_Ensure`` and ctypes releases it
+  around every libcosimc call, so there is no deadlock. The FMUs' Python code runs in
+  the host's interpreter (its numpy/scipy, its ``sys.modules``).
+  A C host (e.g. the ``cosim`` command-line tool) has no Python: ``dlopen`` of the
+  wrapper fails with ``undefined symbol: _Py_NoneStruct``. Workaround: preload a shared
+  libpython of the same version, ``LD_PRELOAD=/path/to/libpython3.11.so cosim run
+  system.ssp`` (Debian/Ubuntu ship one in the ``libpython3.11`` package even for their
+  statically linked ``python3``; pyenv/conda builds have ``lib/libpython3.11.so``); the
+  wrapper then starts an interpreter itself (``Py_Initialize``), which must find numpy
+  and scipy (``PYTHONPATH=<venv>/lib/python3.11/site-packages``). Checked with a
+  minimal C host: instantiate, initialise, step and free work, but the process aborted
+  at exit (``free(): corrupted unsorted chunks``, after ``fmi2FreeInstance``), i.e. in
+  pythonfmu's interpreter teardown. A host process that embeds Python with its
+  libpython loaded ``RTLD_LOCAL`` can do the same in-process with
+  ``ctypes.CDLL(path_to_libpython, mode=ctypes.RTLD_GLOBAL)`` before loading the FMU.
+  A Python built without any shared libpython cannot serve a C host: install or build
+  one that has it.
 * Results: :func:`run_ssp_libcosim` steps the execution one communication step at a
   time and reads the requested variables with a last-value observer (libcosimpy's
   time-series observer trims samples whose step number is 0, so it is not used).
@@ -99,7 +112,10 @@ true), ignores ``ssc:LinearTransformation`` (it looks for ``ssd:LinearTransforma
 and never applies it), starts every connected input at 0.0 (the vehicle's first step
 sees no contact force, the track's sees every wheel at x = 0), skips the initialization-
 mode exchange, ignores the OSP step size (default: stop time / 100) and steps while
-``time < stop`` with accumulated ``time += h``. :func:`run_ssp_fmpy` therefore uses
+``time < stop`` with accumulated ``time += h``. Run on the exported plain-track system
+(``simulate_ssp(file, stop_time=0.002, step_size=2e-5)``) it starts the bogie at x = 0
+instead of its ``x0`` (the rear wheelset off the panel) and the contact force grows to
+2.1 times the static load within the 100 steps. :func:`run_ssp_fmpy` therefore uses
 ``read_ssd`` for parsing only and runs its own fixed-step Jacobi master with libcosim's
 semantics (above) on ``fmpy.fmi2.FMU2Slave`` instances.
 """
@@ -109,7 +125,6 @@ import dataclasses
 import json
 import math
 import os
-import shutil
 import tempfile
 import zipfile
 from dataclasses import dataclass, field
@@ -149,7 +164,6 @@ OSP_ANNOTATION = "com.opensimulationplatform"
 VEHICLE, TRACK = "vehicle", "track"
 START_MARGIN_SLEEPERS = 2   # default start: rearmost wheelset this many spacings after sleeper 0
 N_WHEELS = {"bogie": 4, "quarter": 2}
-TRACK_PORTS_OUT = ("Fz",)
 NS_PER_S = 1_000_000_000
 _ZIP_DATE = (2000, 1, 1, 0, 0, 0)  # fixed member dates: the same input gives the same archive
 
@@ -261,7 +275,10 @@ def default_x_start(scenario) -> float:
 
     The rearmost wheelset stands ``START_MARGIN_SLEEPERS`` sleeper spacings after the
     first sleeper: ``x_sleeper0 + 2 * spacing + wheelbase`` for the bogie,
-    ``x_sleeper0 + 2 * spacing`` for the quarter vehicle (as ``turnout run``).
+    ``x_sleeper0 + 2 * spacing`` for the quarter vehicle. ``turnout run``
+    (:func:`orchestrator.master.start_position`) makes the same choice but with the
+    default wheelbase even when ``vehicle.start_values`` changes it; here the actual
+    wheelbase is used.
     """
     from track.layout import build_layout
 
@@ -273,7 +290,8 @@ def default_x_start(scenario) -> float:
 def track_parameters(scenario) -> dict:
     """Parameter values of the track component (before filtering against the FMU)."""
     t, v = scenario.track, scenario.vehicle
-    return {"speed": float(v.speed), "static_wheel_load": 0.5 * float(v.axle_load), "extrapolate": True,
+    return {"speed": float(v.speed), "static_wheel_load": 0.5 * float(v.axle_load),
+            "extrapolate": bool(scenario.simulation.extrapolation),
             "h1": float(t.ballast.stiffness_scale), "h2": float(t.rail_pad.stiffness_scale),
             "impact_angle": float(t.impact_angle)}
 
@@ -287,7 +305,8 @@ def vehicle_parameters(scenario) -> dict:
     x0 = float(sim.x_start) if sim.x_start is not None else default_x_start(scenario)
     values = {"speed": float(veh.speed), "axle_load": float(veh.axle_load), "x0": x0}
     for key in ("speed", "axle_load", "x0"):
-        if key in start_values and float(start_values[key]) != values[key]:
+        given = start_values.get(key, values[key])
+        if isinstance(given, bool) or not isinstance(given, (int, float)) or float(given) != values[key]:
             where = {"speed": "vehicle.speed", "axle_load": "vehicle.axle_load", "x0": "simulation.x_start"}[key]
             raise UserInputError(f"vehicle.start_values: {key!r} = {start_values[key]!r} contradicts "
                                  f"{where} ({values[key]!r}); give it there only")
@@ -314,7 +333,10 @@ def _track_fmu(scenario, n_wheels: int, fmu_dir: Path | None, tmp: Path) -> Path
         return Path(fmu_dir) / "track.fmu"
     from fmus.build import build_track_fmu
 
-    return Path(build_track_fmu(scenario.track, n_wheels, Path(fmu_dir) if fmu_dir is not None else tmp))
+    values = track_parameters(scenario)
+    defaults = {k: values[k] for k in ("speed", "static_wheel_load", "extrapolate")}
+    return Path(build_track_fmu(scenario.track, n_wheels, Path(fmu_dir) if fmu_dir is not None else tmp,
+                                **defaults))
 
 
 def _vehicle_fmu(scenario, fmu_dir: Path | None, tmp: Path) -> Path:
@@ -358,7 +380,18 @@ def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
         start values, a step that is not a whole number of nanoseconds.
     """
     out_file = Path(out_file)
+    try:
+        _step_ns(scenario.simulation.step)
+    except UserInputError as exc:
+        raise UserInputError(f"simulation.step: {exc}") from None
     n = _n_wheels(scenario)
+    vehicle_values = vehicle_parameters(scenario)
+    if scenario.vehicle.builtin:  # the wheels must stay on the modelled panel (as in `turnout run`)
+        from track.layout import build_layout
+
+        from .master import check_passage
+
+        check_passage(scenario, build_layout(scenario.track.layout), vehicle_values["x0"])
     with tempfile.TemporaryDirectory(prefix="xpanel_ssp_") as tmp:
         tmp = Path(tmp)
         vehicle_fmu = _vehicle_fmu(scenario, fmu_dir, tmp)
@@ -369,7 +402,7 @@ def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
         optional = {"h1", "h2", "impact_angle"}
         track_values = {k: v for k, v in track_parameters(scenario).items()
                         if k not in optional or k in track_md}
-        components = [Component(VEHICLE, vehicle_fmu, vehicle_parameters(scenario)),
+        components = [Component(VEHICLE, vehicle_fmu, vehicle_values),
                       Component(TRACK, track_fmu, track_values)]
         sim = scenario.simulation
         return write_ssp(out_file, components, system_connections(scenario), name=scenario.name,
@@ -702,6 +735,8 @@ def run_ssp_libcosim(ssp_file: Path, step: float, duration: float, record: list[
         Simulated time [s]; ``ceil(duration / step)`` steps are taken.
     record : list of str
         ``"component.variable"`` names (Real variables), e.g. ``"track.wheel1_Fz"``.
+        An input reads the value the FMU used over the step that just ended (libcosim
+        hands the newly transferred values over at the next step).
     output_every : int
         Keep every n-th communication point.
     log_level : str

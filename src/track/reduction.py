@@ -121,16 +121,32 @@ def craig_bampton(K, M, boundary: np.ndarray, f_modes: float | None = None,
                        interior=I, modes_I=Phi, K_II_factor=K_II_factor)
 
 
+def residual_flexibility(rom: ReducedBody) -> np.ndarray:
+    """The full residual flexibility matrix ``R`` (n, n) [m/N], computed once per body.
+
+    ``R[i, j]`` is the static correction displacement at dof i for a unit load at dof j
+    (:func:`static_correction`); rows and columns of boundary dofs are zero.
+    """
+    R = getattr(rom, "_R", None)
+    if R is None:
+        n = rom.T.shape[0]
+        R = np.zeros((n, n))
+        I = rom.interior
+        if I is not None and I.size:
+            w2 = (2 * np.pi * rom.mode_freqs) ** 2
+            RI = la.cho_solve(rom.K_II_factor, np.eye(I.size)) - (rom.modes_I / w2) @ rom.modes_I.T
+            R[np.ix_(I, I)] = 0.5 * (RI + RI.T)
+        rom._R = R
+    return R
+
+
 def element_residual(rom: ReducedBody, dofs: np.ndarray) -> np.ndarray:
     """Block of the residual flexibility for loads on ``dofs`` (e.g. one element's 4 dofs).
 
     ``R[i, j]`` is the static correction displacement at ``dofs[i]`` for a unit load
     at ``dofs[j]`` (see :func:`static_correction`); shape (k, k) [m/N].
     """
-    n = rom.T.shape[0]
-    F = np.zeros((n, len(dofs)))
-    F[dofs, np.arange(len(dofs))] = 1.0
-    return static_correction(rom, F)[dofs, :]
+    return residual_flexibility(rom)[np.ix_(dofs, dofs)]
 
 
 def reconstruct(rom: ReducedBody, q: np.ndarray) -> np.ndarray:

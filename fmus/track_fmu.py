@@ -1,0 +1,391 @@
+"""Track FMU slave: ``Track`` (FMI 2.0 co-simulation, pythonfmu), a thin map onto ``track.cosim.TrackCosim``.
+
+The scenario's ``track:`` section is baked into the FMU at build time as
+``resources/track_fmu.json`` (:func:`resource_payload`, written by
+``fmus.build.build_track_fmu``), together with the number of wheels and the
+defaults of the run parameters.  The slave reads it from its resources folder
+(``self.resources``, which pythonfmu passes to every instance: the FMU's
+``resources/`` at run time, the staging folder at build time), so the variable
+list, their start values and the model all come from one file.
+
+Ports (DESIGN §4.4, the vehicle's with causality mirrored), wheels i = 1..n,
+front wheelset left, right, then the next:
+
+* inputs  ``wheel{i}_x`` [m]     track coordinate of the wheel
+          ``wheel{i}_z`` [m]     vertical position of the wheel's contact point, upward +
+          ``wheel{i}_vz`` [m/s]  its velocity
+* outputs ``wheel{i}_Fz`` [N]    contact force on the wheel, upward + (initial="approx",
+                                 start value = ``static_wheel_load``)
+          ``wheel{i}_Fz_rail`` [N]  part carried by the running / wing rail
+          ``wheel{i}_Fz_nose`` [N]  part carried by the crossing nose
+          ``wheel{i}_rail_z`` [m]   rail deflection under the wheel, upward + (0 until the first step)
+* parameters, variability "fixed" (read at exitInitializationMode, where the model
+  is rebuilt from the baked parameters with these overrides; ``track.model``'s
+  in-process cache of reduced bodies makes a second instance or a re-init cheap):
+  ``speed`` [m/s], ``static_wheel_load`` [N], ``h1`` [-] (ballast stiffness
+  scale), ``h2`` [-] (rail-pad stiffness scale), ``impact_angle`` [rad],
+  ``pad_stiffness`` [N/m], ``ballast_stiffness_per_length`` [N/m2] (N/m per m),
+  ``void_sleeper`` (Integer; -1: no change; else the void under that sleeper is
+  added or replaced by ``void_gap_1`` .. ``void_gap_6`` [m]), ``extrapolate``,
+  ``auto_offset`` (Boolean), ``record_every`` (Integer, 0: no recording); and,
+  tunable, ``record_file`` (String, read at terminate: if not empty the recorded
+  states are written there as ``.npz``).
+
+Lazy construction: ``TrackCosim`` needs the communication step, which the FMU
+learns at its first ``doStep``; it is built there, and its first step puts the
+track in static equilibrium under the static wheel loads at the wheels' input
+positions.  The step is fixed from then on: a ``doStep`` with another step size is
+discarded with a log message.  A model failure (``ConvergenceError``: state
+unchanged; ``DivergenceError``: the state is lost, every later step is discarded
+until an FMU state is restored) gives fmi2Discard with the message
+(``fmus.base``).  The FMU state holds the ``TrackCosim`` state, its step and the
+lazy-construction flag; recorded samples are not part of it (a restore truncates
+the record to the restored length).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Any, Dict
+
+import numpy as np
+from pythonfmu.default_experiment import DefaultExperiment
+from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Variability
+from pythonfmu.variables import Integer, Real, String
+
+from .base import UNITS, CosimSlave
+
+try:  # inside a built FMU the model package is bundled next to this module
+    from .track import cosim as _cosim, model as _model, params as _params
+except ImportError:  # source tree: src/ on sys.path
+    from track import cosim as _cosim, model as _model, params as _params
+
+# ballast bed stiffness is given per metre of sleeper: N/m per m (fmus.base's unit registry)
+UNITS.setdefault("N/m2", {"kg": 1, "m": -1, "s": -2})
+
+RESOURCE_FILE = "track_fmu.json"   # in the FMU's resources folder
+RESOURCE_FORMAT = "xpanel-track-fmu/1"
+N_VOID_GAPS = 6                    # gaps at 6 equidistant points along a sleeper (DESIGN §3)
+STEP_RTOL = 1e-12                  # step sizes closer than this (relative) count as equal
+SIDE = ("left", "right")
+RUN_DEFAULTS = {"speed": 33.333, "static_wheel_load": 98100.0, "extrapolate": True,
+                "auto_offset": True, "record_every": 0}   # DESIGN §4.2 example: 120 km/h, 20 t axle
+
+
+def resource_payload(params: "_params.TrackParams", n_wheels: int, **defaults: Any) -> bytes:
+    """The baked resource file of a track FMU (JSON).
+
+    Parameters
+    ----------
+    params : TrackParams
+        The scenario's track section.
+    n_wheels : int
+        Number of wheels (bogie 4, quarter vehicle 2).
+    **defaults
+        Defaults of the run parameters, keys of :data:`RUN_DEFAULTS`: ``speed`` [m/s],
+        ``static_wheel_load`` [N], ``extrapolate``, ``auto_offset`` (bool),
+        ``record_every`` (int).
+
+    Returns
+    -------
+    bytes
+    """
+    unknown = set(defaults) - set(RUN_DEFAULTS)
+    if unknown:
+        raise TypeError(f"unknown track FMU default(s) {sorted(unknown)}; known: {sorted(RUN_DEFAULTS)}")
+    if int(n_wheels) < 1:
+        raise ValueError(f"n_wheels = {n_wheels!r} must be >= 1")
+    values = dict(RUN_DEFAULTS, **defaults)
+    payload = {"format": RESOURCE_FORMAT, "n_wheels": int(n_wheels),
+               "track": dataclasses.asdict(params),
+               "defaults": {"speed": float(values["speed"]),
+                            "static_wheel_load": float(values["static_wheel_load"]),
+                            "extrapolate": bool(values["extrapolate"]),
+                            "auto_offset": bool(values["auto_offset"]),
+                            "record_every": int(values["record_every"])}}
+    return json.dumps(payload, indent=1).encode("utf-8")
+
+
+class StepSizeError(ValueError):
+    """A communication step differs from the first one (the track FMU is fixed-step)."""
+
+
+class Track(CosimSlave):
+    """Reduced track with wheel–rail contact; n wheels (see module docstring)."""
+
+    author = "crossing-panel co-simulation project"
+    version = "0.1"
+    description = ("Crossing-panel track (Craig-Bampton reduced rails and sleepers, rail pads, bi-linear "
+                   "ballast) with Hertz wheel-rail contact on wing rail and nose; vertical dynamics")
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=1.0, step_size=2e-5)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        if self.resources is None:
+            raise FileNotFoundError(f"the track FMU needs its resources folder (with {RESOURCE_FILE})")
+        baked = json.loads((Path(self.resources) / RESOURCE_FILE).read_text(encoding="utf-8"))
+        if baked.get("format") != RESOURCE_FORMAT:
+            raise ValueError(f"{RESOURCE_FILE}: format {baked.get('format')!r}, expected {RESOURCE_FORMAT!r}")
+        self._baked = _params.track_params_from_dict(baked["track"])
+        n = self._n = int(baked["n_wheels"])
+        p = self._baked
+        voids = p.ballast.voids
+        first_void = voids[0] if voids else None   # defaults reproduce it: replacing it changes nothing
+        self._values: Dict[str, Any] = dict(baked["defaults"])
+        self._values.update(
+            h1=p.ballast.stiffness_scale, h2=p.rail_pad.stiffness_scale, impact_angle=p.impact_angle,
+            pad_stiffness=p.rail_pad.stiffness, ballast_stiffness_per_length=p.ballast.stiffness_per_length,
+            void_sleeper=first_void.sleeper if first_void else -1, record_file="")
+        for j in range(N_VOID_GAPS):
+            self._values[f"void_gap_{j + 1}"] = float(first_void.gaps[j]) if first_void else 0.0
+
+        self._x, self._z, self._vz = np.zeros(n), np.zeros(n), np.zeros(n)  # inputs
+        self._model = None        # TrackModel, built at exitInitializationMode
+        self._built = None        # the TrackParams it was built from
+        self._cosim = None        # TrackCosim, built at the first doStep (needs the step)
+        self._t_first = None      # time of the first doStep [s] (TrackCosim's time 0)
+
+        self.add_parameter("speed", "vehicle speed along increasing x, to extrapolate wheel_x over a "
+                           "step and to start the static state", "m/s", *self._accessors("speed"))
+        self.add_parameter("static_wheel_load", "static load of each wheel (axle_load / 2), positive; the "
+                           "track starts in static equilibrium under it", "N",
+                           *self._accessors("static_wheel_load"))
+        self.add_parameter("h1", "ballast stiffness scale (track.ballast.stiffness_scale)", "-",
+                           *self._accessors("h1"))
+        self.add_parameter("h2", "rail-pad stiffness scale (track.rail_pad.stiffness_scale)", "-",
+                           *self._accessors("h2"))
+        self.add_parameter("impact_angle", "crossing impact (dip) angle (track.crossing.impact_angle)",
+                           "rad", *self._accessors("impact_angle"))
+        self.add_parameter("pad_stiffness", "rail-pad stiffness per rail seat (track.rail_pad.stiffness)",
+                           "N/m", *self._accessors("pad_stiffness"))
+        self.add_parameter("ballast_stiffness_per_length", "ballast bed stiffness per metre of sleeper, "
+                           "N/m per m (track.ballast.stiffness_per_length)", "N/m2",
+                           *self._accessors("ballast_stiffness_per_length"))
+        self._add_integer("void_sleeper", "sleeper index whose ballast void is added or replaced by "
+                          "void_gap_1..6; -1: the baked voids unchanged")
+        for j in range(N_VOID_GAPS):
+            self.add_parameter(f"void_gap_{j + 1}", f"ballast void gap at point {j + 1} of 6, equidistant "
+                               "from sleeper end to end (used when void_sleeper >= 0)", "m",
+                               *self._accessors(f"void_gap_{j + 1}"))
+        self.add_parameter("extrapolate", "true: inputs are start-of-step values, extrapolated with vz and "
+                           "speed (Jacobi hosts); false: end-of-step values (Gauss-Seidel, vehicle first)",
+                           "-", *self._accessors("extrapolate", bool), boolean=True)
+        self.add_parameter("auto_offset", "keep the difference between the vehicle's first wheel_z and the "
+                           "track's static wheel position as an offset (no drop transient)", "-",
+                           *self._accessors("auto_offset", bool), boolean=True)
+        self._add_integer("record_every", "record the track state every this many steps (0: never)")
+        self._register(String("record_file", causality=Fmi2Causality.parameter,
+                              variability=Fmi2Variability.tunable,
+                              description=self._describe("if not empty: at terminate the recorded states "
+                                                         "(t, q, v, x, Fz, parts) are written to this .npz",
+                                                         "-"),
+                              getter=lambda: self._values["record_file"],
+                              setter=lambda value: self._values.__setitem__("record_file", str(value))), "-")
+
+        for i in range(n):
+            label = self._label(i)
+            self.add_input(f"wheel{i + 1}_x", f"track coordinate of wheel {i + 1} ({label})", "m",
+                           *self._input(self._x, i))
+            self.add_input(f"wheel{i + 1}_z", f"vertical position of wheel {i + 1} ({label}) contact "
+                           "point, upward +", "m", *self._input(self._z, i))
+            self.add_input(f"wheel{i + 1}_vz", f"vertical velocity of wheel {i + 1} ({label}), upward +",
+                           "m/s", *self._input(self._vz, i))
+        for i in range(n):
+            label = self._label(i)
+            self._add_output_with_start(
+                f"wheel{i + 1}_Fz", f"vertical contact force on wheel {i + 1} ({label}), upward +; "
+                "static_wheel_load until the first step", "N", lambda i=i: self._output("Fz", i),
+                ("static_wheel_load",))
+            self.add_output(f"wheel{i + 1}_Fz_rail", f"contact force of wheel {i + 1} ({label}) on the "
+                            "running or wing rail", "N", lambda i=i: self._output("rail", i),
+                            ("static_wheel_load",))
+            self.add_output(f"wheel{i + 1}_Fz_nose", f"contact force of wheel {i + 1} ({label}) on the "
+                            "crossing nose", "N", lambda i=i: self._output("nose", i))
+            self.add_output(f"wheel{i + 1}_rail_z", f"rail deflection under wheel {i + 1} ({label}), "
+                            "upward +; 0 until the first step", "m", lambda i=i: self._output("rail_z", i))
+
+    # ------------------------------------------------------------- registration
+    def _add_integer(self, name: str, description: str) -> None:
+        """A fixed Integer parameter (the base class registers Real and Boolean ones)."""
+        self._register(Integer(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                               description=self._describe(description, "-"),
+                               getter=lambda: self._values[name],
+                               setter=self._accessors(name, int)[1]), "-")
+
+    def _add_output_with_start(self, name: str, description: str, unit: str, getter, depends_on) -> None:
+        """A continuous Real output with initial="approx", so it carries a start value
+        (the getter's value at build time) and stays an InitialUnknown."""
+        self._register(Real(name, causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
+                            initial=Fmi2Initial.approx, description=self._describe(description, unit),
+                            getter=getter), unit)
+        self._initial_dependencies[name] = tuple(depends_on)
+
+    @staticmethod
+    def _label(i: int) -> str:
+        return f"wheelset {i // 2 + 1} {SIDE[i % 2]}"
+
+    def _accessors(self, name: str, cast=float):
+        def get():
+            return self._values[name]
+
+        def set_(value):
+            if self._model is not None and not self._restoring:
+                self.log_warning(f"parameter {name} is fixed after initialization: new value {value!r} ignored")
+                return
+            self._values[name] = cast(value)
+        return get, set_
+
+    @staticmethod
+    def _input(array: np.ndarray, i: int):
+        def set_(value):
+            array[i] = value
+        return (lambda: float(array[i])), set_
+
+    def _output(self, which: str, i: int) -> float:
+        c = self._cosim
+        if c is None:  # before the first step: the static state's contact forces
+            if which in ("Fz", "rail"):
+                return float(self._values["static_wheel_load"])
+            return 0.0
+        if which == "Fz":
+            return float(c.Fz[i])
+        if which == "rail":
+            return float(c.parts[i, 0])
+        if which == "nose":
+            return float(c.parts[i, 1])
+        return float(c.rail_w[i])
+
+    # ---------------------------------------------------------------- parameters
+    def _check_values(self) -> None:
+        """Raise ValueError naming the first invalid parameter value."""
+        v = self._values
+        positive = ("static_wheel_load", "h1", "h2", "pad_stiffness", "ballast_stiffness_per_length")
+        for name in ("speed", "impact_angle") + positive + tuple(f"void_gap_{j + 1}" for j in range(N_VOID_GAPS)):
+            if not math.isfinite(v[name]):
+                raise ValueError(f"parameter {name} = {v[name]!r} is not finite")
+        for name in positive:
+            if not v[name] > 0.0:
+                raise ValueError(f"parameter {name} = {v[name]!r} must be > 0")
+        for name in ("speed", "impact_angle") + tuple(f"void_gap_{j + 1}" for j in range(N_VOID_GAPS)):
+            if v[name] < 0.0:
+                raise ValueError(f"parameter {name} = {v[name]!r} must be >= 0")
+        n_sleepers = self._baked.layout.sleepers
+        if not -1 <= v["void_sleeper"] < n_sleepers:
+            raise ValueError(f"parameter void_sleeper = {v['void_sleeper']} must be -1 (none) or a sleeper "
+                             f"index 0..{n_sleepers - 1}")
+        if v["record_every"] < 0:
+            raise ValueError(f"parameter record_every = {v['record_every']} must be >= 0")
+
+    def track_params(self) -> "_params.TrackParams":
+        """The baked track parameters with the FMU parameters applied."""
+        v, p = self._values, self._baked
+        voids = p.ballast.voids
+        k = v["void_sleeper"]
+        if k >= 0:
+            gaps = tuple(float(v[f"void_gap_{j + 1}"]) for j in range(N_VOID_GAPS))
+            voids = tuple(sorted([s for s in voids if s.sleeper != k] + [_params.VoidSpec(k, gaps)],
+                                 key=lambda s: s.sleeper))
+        return dataclasses.replace(
+            p, impact_angle=v["impact_angle"],
+            rail_pad=dataclasses.replace(p.rail_pad, stiffness=v["pad_stiffness"], stiffness_scale=v["h2"]),
+            ballast=dataclasses.replace(p.ballast, stiffness_per_length=v["ballast_stiffness_per_length"],
+                                        stiffness_scale=v["h1"], voids=voids))
+
+    def _build_model(self) -> None:
+        params = self.track_params()
+        if self._model is None or params != self._built:
+            self._model = _model.build_track(params)
+            self._built = params
+
+    def _new_cosim(self, h: float) -> "_cosim.TrackCosim":
+        v = self._values
+        return _cosim.TrackCosim(self._built, self._n, v["static_wheel_load"], h, speed=v["speed"],
+                                 extrapolate=v["extrapolate"], auto_offset=v["auto_offset"],
+                                 record_every=v["record_every"], model=self._model)
+
+    # ----------------------------------------------------------------- lifecycle
+    def initialize_model(self) -> None:
+        self._check_values()
+        self._build_model()
+        self._cosim = None
+        self._t_first = None
+        if self._values["record_file"] and not self._values["record_every"]:
+            self.log_warning("record_file is set but record_every = 0: nothing will be recorded")
+
+    def advance(self, current_time: float, step_size: float) -> None:
+        c = self._cosim
+        if c is None:
+            c = self._new_cosim(step_size)
+            self._cosim, self._t_first = c, current_time
+        elif abs(step_size - c.h) > STEP_RTOL * c.h:
+            raise StepSizeError(f"the track FMU runs with a fixed communication step: step size "
+                                f"{step_size!r} s differs from the first step {c.h!r} s")
+        try:  # a ConvergenceError leaves the state unchanged: the step may be retried
+            c.do_step(self._x, self._z, self._vz)
+        except _cosim.DivergenceError as exc:
+            # the step has overwritten the state with a diverged one: refuse to go on
+            self._failure = f"{exc} (restore an FMU state saved before to continue)"
+            raise
+
+    def terminate(self):
+        path = self._values["record_file"]
+        if not path:
+            return
+        try:
+            self.write_record(path)
+        except Exception as exc:  # never raise into pythonfmu (it would free the instance)
+            self.log_error(f"record_file {path!r} could not be written: {type(exc).__name__}: {exc}")
+
+    def write_record(self, path: str | Path) -> Path:
+        """Write the recorded states as ``.npz``.
+
+        Arrays: ``t`` (nt,) simulation time [s], ``q``, ``v`` (nt, n_dofs) reduced coordinates and
+        their rates, ``x`` (nt, n_wheels) [m], ``Fz`` (nt, n_wheels) [N], ``parts``
+        (nt, n_wheels, 2) [N] (rail / wing rail, nose); and ``track_params`` (the
+        effective parameters as UTF-8 JSON bytes, for ``track.params.track_params_from_dict``),
+        ``static_wheel_load`` [N], ``h`` [s].  With no step taken the arrays are empty.
+        """
+        path = Path(path)
+        if self._cosim is not None:
+            arrays = self._cosim.record.arrays()
+            arrays["t"] = arrays["t"] + self._t_first
+            h = self._cosim.h
+        else:
+            arrays = _cosim.Record().arrays()
+            h = float("nan")
+        params = self._built if self._built is not None else self.track_params()
+        params_json = json.dumps(dataclasses.asdict(params)).encode("utf-8")  # bytes: HDF5-friendly
+        np.savez(path, **arrays, track_params=np.array(params_json),
+                 static_wheel_load=np.array(self._values["static_wheel_load"]), h=np.array(h))
+        return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+    # ----------------------------------------------------------------- FMU state
+    def get_internal_state(self) -> Dict[str, Any]:
+        state = super().get_internal_state()
+        c = self._cosim
+        state.update(initialized=self._model is not None, t_first=self._t_first,
+                     h=None if c is None else c.h, cosim=None if c is None else c.get_state())
+        return state
+
+    def set_internal_state(self, state: Dict[str, Any]) -> None:
+        super().set_internal_state(state)
+        self._t_first = state["t_first"]
+        if not state["initialized"]:
+            self._model = self._built = self._cosim = None
+            return
+        self._build_model()  # no-op unless the restored parameters differ from the built ones
+        if state["cosim"] is None:
+            self._cosim = None
+            return
+        c = self._cosim
+        if c is None or c.model is not self._model or not self._same_settings(c, state["h"]):
+            c = self._cosim = self._new_cosim(state["h"])
+        c.set_state(state["cosim"])
+
+    def _same_settings(self, c: "_cosim.TrackCosim", h: float) -> bool:
+        v = self._values
+        return (c.h == h and c.speed == v["speed"] and c.extrapolate == v["extrapolate"]
+                and c.auto_offset == v["auto_offset"] and c.record_every == v["record_every"]
+                and np.all(c.Q0 == v["static_wheel_load"]))
