@@ -33,7 +33,7 @@ import numpy as np
 
 from .errors import UserInputError
 
-BOGIE_WHEELBASE = 2.5  # m: the bogie FMU's default wheelbase (vehicle.BogieParams)
+POSITION_TOL = 1e-6  # m: the vehicle's wheel 1 must start where the scenario puts it
 START_MARGIN_SLEEPERS = 2  # the rear wheelset starts this many sleepers inside the panel
 END_MARGIN_SLEEPERS = 1    # the front wheelset must stay this many sleepers inside the panel
 
@@ -389,13 +389,23 @@ def n_wheels(scenario) -> int:
     return {"bogie": 4, "quarter": 2}.get(kind, len(scenario.vehicle.ports))
 
 
+def wheelset_offsets(scenario) -> list[float]:
+    """Offsets of our vehicle's wheelsets behind the front one [m] (<= 0), with the
+    wheelbase of ``vehicle.start_values`` when it is given there."""
+    if vehicle_kind(scenario) != "bogie":
+        return [0.0]
+    from vehicle.bogie import BogieParams
+
+    return [0.0, -float(scenario.vehicle.start_values.get("wheelbase", BogieParams().wheelbase))]
+
+
 def start_position(scenario, layout) -> float:
-    """Front-wheelset x at t = 0: ``simulation.x_start`` or just inside the panel start."""
+    """Front-wheelset x at t = 0: ``simulation.x_start``, or the position where the
+    rearmost wheelset stands START_MARGIN_SLEEPERS spacings after the first sleeper."""
     if scenario.simulation.x_start is not None:
-        return scenario.simulation.x_start
+        return float(scenario.simulation.x_start)
     spacing = layout.params.sleeper_spacing
-    behind = BOGIE_WHEELBASE if vehicle_kind(scenario) == "bogie" else 0.0
-    return layout.sleepers[0].x + behind + START_MARGIN_SLEEPERS * spacing
+    return float(layout.sleepers[0].x - min(wheelset_offsets(scenario)) + START_MARGIN_SLEEPERS * spacing)
 
 
 def check_passage(scenario, layout, x_front: float) -> None:
@@ -511,6 +521,7 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
     X, Z, VZ, F, RZ = (np.empty((nout, m)) for _ in range(5))
     P = np.empty((nout, m, 2))
     error = None
+    setup_error = None
     done = 0
     try:
         t0 = 0.0
@@ -521,6 +532,11 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
             track.initialize(t0)
         Fz = np.array(vehicle.Fz0, float)
         x, z, vz = vehicle.outputs()
+        if abs(x[0] - x0) > POSITION_TOL:
+            raise UserInputError(
+                f"vehicle: the vehicle FMU's wheel 1 starts at x = {x[0]:.4f} m but the scenario starts it at "
+                f"{x0:.4f} m (simulation.x_start or the default); set the FMU's start position through "
+                "vehicle.start_values")
         T[0], X[0], Z[0], VZ[0], F[0], RZ[0] = t0, x, z, vz, Fz, np.nan
         P[0] = np.nan
         done = 1
@@ -542,6 +558,8 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
         from track.dynamics import ConvergenceError
         if not isinstance(exc, (CosimError, DivergenceError, ConvergenceError, UserInputError)):
             raise
+        if done == 0:  # failed while setting up: nothing computed, report it as such
+            setup_error = exc
         error = str(exc)
         t_loop = time.perf_counter() - t_wall - t_setup
     finally:
@@ -550,6 +568,10 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
                 u.terminate()
             except Exception:  # noqa: BLE001 - an FMU that failed may refuse to terminate
                 pass
+    if setup_error is not None:
+        if tmp is not None:
+            tmp.cleanup()
+        raise setup_error if isinstance(setup_error, UserInputError) else CosimError(str(setup_error))
     record = None
     if record_states:
         if backend == "inprocess":

@@ -162,7 +162,6 @@ NS = {
 }
 OSP_ANNOTATION = "com.opensimulationplatform"
 VEHICLE, TRACK = "vehicle", "track"
-START_MARGIN_SLEEPERS = 2   # default start: rearmost wheelset this many spacings after sleeper 0
 N_WHEELS = {"bogie": 4, "quarter": 2}
 NS_PER_S = 1_000_000_000
 _ZIP_DATE = (2000, 1, 1, 0, 0, 0)  # fixed member dates: the same input gives the same archive
@@ -260,31 +259,18 @@ def system_connections(scenario) -> list[Connection]:
     return out
 
 
-def _wheel_offsets(scenario) -> list[float]:
-    """Offsets of our vehicle's wheelsets behind the front one [m] (<= 0)."""
-    if scenario.vehicle.fmu == "quarter":
-        return [0.0]
-    from vehicle import BogieParams  # the model package: src/vehicle
-
-    wheelbase = float(scenario.vehicle.start_values.get("wheelbase", BogieParams().wheelbase))
-    return [0.0, -wheelbase]
-
-
 def default_x_start(scenario) -> float:
-    """Default track coordinate of the front wheelset at t = 0 [m] (our vehicles).
-
-    The rearmost wheelset stands ``START_MARGIN_SLEEPERS`` sleeper spacings after the
-    first sleeper: ``x_sleeper0 + 2 * spacing + wheelbase`` for the bogie,
-    ``x_sleeper0 + 2 * spacing`` for the quarter vehicle. ``turnout run``
-    (:func:`orchestrator.master.start_position`) makes the same choice but with the
-    default wheelbase even when ``vehicle.start_values`` changes it; here the actual
-    wheelbase is used.
-    """
+    """Default track coordinate of the front wheelset at t = 0 [m]: the master's choice
+    (:func:`orchestrator.master.start_position`), so the SSP and ``turnout run`` agree."""
     from track.layout import build_layout
 
-    lay = build_layout(scenario.track.layout)
-    spacing = scenario.track.layout.sleeper_spacing
-    return float(lay.sleepers[0].x - min(_wheel_offsets(scenario)) + START_MARGIN_SLEEPERS * spacing)
+    from .master import start_position
+
+    sc = scenario
+    if sc.simulation.x_start is not None:  # the default, not the scenario's value
+        import dataclasses
+        sc = dataclasses.replace(sc, simulation=dataclasses.replace(sc.simulation, x_start=None))
+    return start_position(sc, build_layout(scenario.track.layout))
 
 
 def track_parameters(scenario) -> dict:

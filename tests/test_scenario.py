@@ -92,9 +92,9 @@ def test_default_scenario_maps_onto_dataclasses(default_scenario):
     assert s.vehicle.builtin and s.vehicle.ports == ()
     sim = s.simulation
     assert (sim.duration, sim.step, sim.output_step, sim.algorithm, sim.extrapolation) == \
-        (1.0, 2.0e-5, 1.0e-4, "gauss-seidel", True)
+        (0.5, 2.0e-5, 1.0e-4, "gauss-seidel", True)
     assert sim.output_every == 5
-    assert sim.n_steps == 50000
+    assert sim.n_steps == 25000
     assert s.sensors is None
 
     # Keys the file leaves out take the dataclass defaults.
@@ -660,7 +660,8 @@ def test_cli_help_exits_0(command, capsys):
 def fake_jobs(monkeypatch):
     calls = []
     module = types.SimpleNamespace(
-        run_scenario=lambda scenario, out_dir, progress=True: calls.append(("run", scenario, out_dir, progress)) or {},
+        run_scenario=lambda scenario, out_dir, progress=True, backend="fmu":
+            calls.append(("run", scenario, out_dir, progress, backend)) or {},
         frf_job=lambda scenario, out_dir, at, fmax: calls.append(("frf", scenario, out_dir, at, fmax)) or {},
     )
     monkeypatch.setitem(sys.modules, "orchestrator.jobs", module)
@@ -670,9 +671,9 @@ def fake_jobs(monkeypatch):
 def test_cli_run_delegates(fake_jobs, default_scenario_path, tmp_path, capsys):
     out = tmp_path / "o"
     assert main(["run", str(default_scenario_path), "--out", str(out), "--set", "vehicle.speed=20",
-                 "--no-progress"]) == 0
-    (_, scenario, out_dir, progress), = fake_jobs
-    assert scenario.vehicle.speed == 20.0 and out_dir == out and progress is False
+                 "--no-progress", "--backend", "inprocess"]) == 0
+    (_, scenario, out_dir, progress, backend), = fake_jobs
+    assert scenario.vehicle.speed == 20.0 and out_dir == out and progress is False and backend == "inprocess"
     assert str(out) in capsys.readouterr().out.strip().splitlines()[-1]
 
 
