@@ -34,27 +34,28 @@ def test_slow_moving_load_reproduces_static_deflection_line():
 
 
 def test_step_halving_shows_second_order():
-    """Error at t = 4 ms vs a reference with h0/32: the fitted order is ~2 (HHT-alpha).
+    """Rail deflection under the load at t = 4 ms vs a reference with h0/32: order ~2.
 
     The loads start at 30 m/s from the static equilibrium at rest (the ballast stays
-    closed under self-weight: a smooth problem), so the scheme's formal order shows
-    once the step resolves the retained modes (h0 = 20 us against modes up to 3.75 kHz).
-    Tolerance on the fitted slope +-0.3: the error constant varies slightly with h.
+    closed under self-weight: a smooth problem), so the scheme's formal order (HHT-alpha:
+    2) shows on the resolved response. The error is measured on the deflection under the
+    load, not on the norm of q: q also holds constraint and modal coordinates far above
+    1/h, which HHT damps on purpose and which converge only once h resolves them.
+    Tolerance on the fitted slope: 1.7-2.3 (the error constant varies slightly with h).
     """
     model = plain(16)
     x0 = model.layout.sleepers[6].x
     loads = [MovingLoad("left", x0, -Q), MovingLoad("right", x0 + 0.1, -Q)]
     T = 0.004
-    h0 = 2e-5
-    pm = model.rail_point("left", x0 + 30 * T)
+    h0 = 1e-5
 
     def run(h):
         r = simulate_moving_loads(model, loads, speed=30.0, duration=T, h=h, output_every=int(round(T / h)))
         assert abs(r.t[-1] - T) < 1e-12
-        return r.q[-1]
+        return r.w[-1, 0]
 
     ref = run(h0 / 32)
     hs = [h0, h0 / 2, h0 / 4]
-    errs = [np.linalg.norm(run(h) - ref) for h in hs]
+    errs = [abs(run(h) - ref) for h in hs]
     rate = np.polyfit(np.log(hs), np.log(errs), 1)[0]
     assert 1.7 < rate < 2.3, (rate, errs)

@@ -19,7 +19,7 @@ The ballast is written as its all-in-contact linear part plus a correction,
 
 (``K``, ``C`` including the linear ballast, ``q~``, ``v~`` the Newmark predictors)
 is constant and factorized once (sparse LU with a minimum-degree ordering of
-A + A^T, which halves the fill against the default). One product with K and one
+A^T A, a third of the default fill on this structure). One product with K and one
 with the (very sparse) C per step. The nonlinear terms (``r_b`` and ``F_k``) are
 iterated with the constant A (modified Newton). At the small steps the contact
 needs, M dominates A and the iteration contracts by roughly
@@ -37,10 +37,14 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .ballast import DAMPING_ONSET
 from .contact import HERTZ_CONSTANT, hertz
 from .model import PointMap, TrackModel
 
 ALPHA_DEFAULT = -0.05   # slight numerical damping of modes far above the cut-off
+NONLINEAR_MARGIN = 1e-3  # m: a closed bushing this deep cannot open within CANDIDATE_REFRESH steps
+CANDIDATE_REFRESH = 10   # steps between updates of the set of possibly nonlinear bushings
+                         # (a sleeper would need ~2 m/s to move 1 mm in 10 steps of 50 us)
 CONTACT_NEWTON_MAX = 30  # Newton iterations of the contact forces within one pass
 CONTACT_TOL = 1e-6       # N: Newton stops when the contact force update is below this ...
 CONTACT_REL_TOL = 1e-9   # ... plus this times the largest wheel force (1e-4 N on 100 kN)
@@ -124,7 +128,7 @@ class TrackIntegrator:
         self._Ct = (model.C + Cb).tocsr()
         b, g, a = self.beta, self.gamma, self.alpha
         A = model.M + (1 + a) * (g * h * self._Ct + b * h * h * self._Kt)
-        self._lu = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+        self._lu = spla.splu(A.tocsc(), permc_spec="MMD_ATA", options={"SymmetricMode": True})
         self.counters.factorizations += 1
         self.t0 = 0.0
         self.k = 0  # steps taken: t = t0 + k h (no accumulated round-off)
@@ -134,6 +138,8 @@ class TrackIntegrator:
         self.Fc = np.array([-ld.force for ld in loads0 if not callable(ld.force)], dtype=float)
         self._influence_cache: dict = {}
         self._Zb = None
+        self._cand = None
+        self._rhs_const = (1.0 + self.alpha) * model.f_gravity
         # initial acceleration from the equation of motion
         r = self.F - self._Ct @ self.v - self._Kt @ self.q
         self.a = spla.spsolve(model.M.tocsc(), r)
@@ -145,6 +151,15 @@ class TrackIntegrator:
         damping onset and without gap (the usual case, so this stays cheap)."""
         bal = self.model.ballast
         return bal.forces(qD, vD) + bal.k * qD + bal.c * vD
+
+    def _nonlinear_bushings(self, q: np.ndarray) -> np.ndarray:
+        """Ballast bushings whose correction can be non-zero within the next step.
+
+        A bushing without gap, closed deeper than ``NONLINEAR_MARGIN``, stays linear
+        (correction exactly zero) unless its sleeper moves that far in one step.
+        """
+        bal = self.model.ballast
+        return np.flatnonzero((bal.gap > 0.0) | (q[self._D] + bal.gap > -NONLINEAR_MARGIN))
 
     def _forces(self, q: np.ndarray, v: np.ndarray, loads: Sequence[PointLoad]) -> np.ndarray:
         """Right-hand side F = f_gravity + point forces + ballast correction."""
@@ -226,7 +241,7 @@ class TrackIntegrator:
         return self._Zb
 
     def step_contacts(self, points: Sequence[PointMap], z_wheel: np.ndarray, surfaces: Sequence[tuple],
-                      c_h: float = HERTZ_CONSTANT, loads: Sequence[PointLoad] = ()) -> np.ndarray:
+                      c_h: float = HERTZ_CONSTANT) -> np.ndarray:
         """Advance one step with Hertz contacts solved implicitly with the track.
 
         Parameters
@@ -239,14 +254,12 @@ class TrackIntegrator:
             Surface heights under each wheel (:mod:`track.contact`) [m].
         c_h : float
             Hertz constant [N/m^1.5].
-        loads : sequence of PointLoad
-            Other point forces.
 
         Returns
         -------
-        ndarray, shape (m, 3)
-            Per wheel: total contact force on the wheel [N] (up +) and its parts on the
-            first and second surface.
+        ndarray, shape (m, 4)
+            Per wheel: total contact force on the wheel [N] (up +), its parts on the first
+            and second surface [N], and the rail deflection under the wheel [m].
 
         Notes
         -----
@@ -254,7 +267,11 @@ class TrackIntegrator:
         ``Fc = hertz(w(Fc))`` with the rail deflection an exact linear function of
         ``Fc`` over the step, ``w = w_lin - G (Fc - Fc_pass) - residual Fc``,
         ``G_ij = (1+alpha) beta h^2 r_i . A^{-1} r_j``; so the contact is as implicit as
-        in a monolithic solution. Passes repeat only while the ballast changes state.
+        in a monolithic solution. Passes repeat only while a ballast bushing changes
+        state; they correct the solution through the ballast influence rows, not a new
+        solve. The force vector is kept as gravity + the few non-zero ballast
+        corrections + the contact forces, so a step touches full-length vectors only in
+        the predictor, one product with K and C, one solve and the update.
         """
         h, a_, b, g = self.h, self.alpha, self.beta, self.gamma
         q0, v0, acc0 = self.q, self.v, self.a
@@ -262,7 +279,19 @@ class TrackIntegrator:
         m = len(points)
         qp = q0 + h * v0 + (0.5 - b) * h * h * acc0
         vp = v0 + (1 - g) * h * acc0
-        base = -a_ * self.F - self._Ct @ (a1 * vp - a_ * v0) - self._Kt @ (a1 * qp - a_ * q0)
+        rhs = self._rhs_const - a_ * self.F - self._Ct @ (a1 * vp - a_ * v0) - self._Kt @ (a1 * qp - a_ * q0)
+        if self._cand is None or self.k % CANDIDATE_REFRESH == 0:
+            self._set_candidates(q0)
+        Dc, cand = self._Dc, self._cand
+        qD = qp[Dc] + bh2 * acc0[Dc]
+        vD = vp[Dc] + gh * acc0[Dc]
+        corr = self._candidate_correction(qD, vD)
+        rhs[Dc] += a1 * corr
+        Fc = self.Fc.tolist() if self.Fc.size == m else [0.0] * m
+        for p, f in zip(points, Fc):
+            rhs[p.gidx] -= (a1 * f) * p.weights
+        acc_lin = self._lu.solve(rhs)
+        self.counters.solves += 1
         Zs = np.empty((m, self.model.n))
         for j, p in enumerate(points):
             Zs[j] = self.influence(p)
@@ -272,22 +301,13 @@ class TrackIntegrator:
             G[i] = (a1 * bh2) * (Zs[:, p.gidx] @ p.weights)
         Gl = G.tolist()
         res = [p.residual for p in points]
-        zw = [float(z) for z in z_wheel]
-        Fc = self.Fc.tolist() if self.Fc.size == m else [0.0] * m
-        Fnl = self._forces(qp + bh2 * acc0, vp + gh * acc0, loads)
-        fscale = max(max(Fc, default=0.0), 1.0) if m else max(np.max(np.abs(Fnl - self.model.f_gravity)), 1.0)
-        ctol = CONTACT_TOL + CONTACT_REL_TOL * fscale
-        out = np.zeros((m, 3))
-        D = self._D
-        rhs = base + a1 * Fnl
-        for p, f in zip(points, Fc):
-            rhs[p.gidx] -= (a1 * f) * p.weights
-        acc_lin = self._lu.solve(rhs)
-        self.counters.solves += 1
+        zw = z_wheel.tolist() if isinstance(z_wheel, np.ndarray) else [float(z) for z in z_wheel]
         Fc_arr = np.array(Fc)
+        ctol = CONTACT_TOL + CONTACT_REL_TOL * max(max(Fc, default=0.0), 1.0)
+        ftol = FORCE_TOL + REL_FORCE_TOL * max(max(Fc, default=0.0), 1.0)
+        out = np.zeros((m, 4))
         for it in range(1, MAX_ITER + 1):
-            q_lin = qp + bh2 * acc_lin
-            w_lin = [float(p.weights @ q_lin[p.gidx]) for p in points]
+            w_lin = [float(p.weights @ (qp[p.gidx] + bh2 * acc_lin[p.gidx])) for p in points]
             Fn = list(Fc)
             # Newton on Fc = hertz(w(Fc)); the wheels couple weakly through G, so each
             # sweep updates every wheel with its own diagonal Jacobian (Jacobi-Newton)
@@ -302,7 +322,7 @@ class TrackIntegrator:
                     if new < 0.0:
                         new, step = 0.0, -Fn[i]
                     Fn[i] = new
-                    out[i, 0], out[i, 1], out[i, 2] = F, F1, F2
+                    out[i, 0], out[i, 1], out[i, 2], out[i, 3] = F, F1, F2, w
                     if abs(step) > dmax:
                         dmax = abs(step)
                 self.counters.contact_newton += 1
@@ -311,42 +331,47 @@ class TrackIntegrator:
             else:
                 raise ConvergenceError(f"contact forces at t = {self.t + h:.6g} s did not converge; "
                                        f"reduce the step h = {h:.3g} s")
-            acc1 = acc_lin - a1 * ((np.array(Fn) - Fc_arr) @ Zs)
-            q1 = qp + bh2 * acc1
-            v1 = vp + gh * acc1
-            F_new = self._forces(q1, v1, loads)
-            # without other point loads only the ballast terms of F can change
-            delta = F_new - Fnl if loads else None
-            dD = F_new[D] - Fnl[D]
-            change = np.max(np.abs(dD if delta is None else delta), initial=0.0)
-            if change <= FORCE_TOL + REL_FORCE_TOL * fscale:
+            acc1 = acc_lin - a1 * ((np.array(Fn) - Fc_arr) @ Zs) if m else acc_lin
+            new_corr = self._candidate_correction(qp[Dc] + bh2 * acc1[Dc], vp[Dc] + gh * acc1[Dc])
+            dD = new_corr - corr
+            change = np.max(np.abs(dD), initial=0.0)
+            if change <= ftol:
                 Fc = Fn
                 break
-            if delta is not None:
-                rhs = rhs + a1 * delta
-                acc_lin = self._lu.solve(rhs)
-                self.counters.solves += 1
-            else:
-                # a bushing opened or closed: correct the linear solution through the
-                # ballast influence rows instead of a new solve
-                sel = np.flatnonzero(np.abs(dD) > FORCE_TOL)
-                acc_lin = acc_lin + a1 * (dD[sel] @ self._ballast_influence()[sel])
-                rhs[D] += a1 * dD
-            Fnl = F_new
+            # a bushing opened or closed: correct the linear solution through the
+            # ballast influence rows instead of a new solve
+            sel = np.flatnonzero(np.abs(dD) > FORCE_TOL)
+            acc_lin = acc_lin + a1 * (dD[sel] @ self._ballast_influence()[cand[sel]])
+            corr = new_corr
         else:
             raise ConvergenceError(
                 f"track step at t = {self.t + h:.6g} s did not converge in {MAX_ITER} iterations "
                 f"(last force change {change:.3g} N); reduce the step h = {h:.3g} s")
-        F = Fnl.copy()
+        F = self.model.f_gravity.copy()
+        F[Dc] += corr
         for p, f in zip(points, Fc):
             F[p.gidx] -= f * p.weights
         self.counters.iterations += it
-        self.counters.max_iterations = max(self.counters.max_iterations, it)
+        if it > self.counters.max_iterations:
+            self.counters.max_iterations = it
         self.counters.steps += 1
-        self.q, self.v, self.a, self.F, self.Fc = q1, v1, acc1, F, np.array(Fc)
+        self.q, self.v, self.a, self.F, self.Fc = qp + bh2 * acc1, vp + gh * acc1, acc1, F, np.array(Fc)
         self.k += 1
         out[:, 0] = Fc  # the converged forces (equal to hertz(w) within CONTACT_TOL)
         return out
+
+    def _set_candidates(self, q: np.ndarray) -> None:
+        cand = self._nonlinear_bushings(q)
+        bal = self.model.ballast
+        self._cand, self._Dc = cand, self._D[cand]
+        self._kc, self._cc, self._gc = bal.k[cand], bal.c[cand], bal.gap[cand]
+
+    def _candidate_correction(self, qD: np.ndarray, vD: np.ndarray) -> np.ndarray:
+        """Ballast correction (f_b + k q + c v) of the candidate bushings, see ballast.py."""
+        k, c = self._kc, self._cc
+        delta = -qD - self._gc
+        f = k * delta - c * vD * np.clip(delta / DAMPING_ONSET, 0.0, 1.0)
+        return np.where(delta > 0.0, np.maximum(f, 0.0), 0.0) + k * qD + c * vD
 
     # ------------------------------------------------------------------ reading
     @property
@@ -364,16 +389,28 @@ class TrackIntegrator:
                 float(point.weights @ self.v[point.gidx]))
 
     def get_state(self) -> np.ndarray:
-        """Full internal state as one flat array (for FMU state save/restore)."""
-        return np.concatenate([[self.t0, self.k, self.Fc.size], self.q, self.v, self.a, self.F, self.Fc])
+        """Full internal state as one flat array (for FMU state save/restore).
+
+        Includes the current set of possibly nonlinear ballast bushings, so that a
+        restored integrator continues bit for bit.
+        """
+        cand = np.zeros(0) if self._cand is None else self._cand.astype(float)
+        return np.concatenate([[self.t0, self.k, self.Fc.size, -1 if self._cand is None else cand.size],
+                               self.q, self.v, self.a, self.F, self.Fc, cand])
 
     def set_state(self, state: np.ndarray) -> None:
         n = self.model.n
         s = np.asarray(state, dtype=float)
-        self.t0, self.k, m = float(s[0]), int(s[1]), int(s[2])
-        self.q, self.v, self.a, self.F = (s[3 + j * n:3 + (j + 1) * n].copy() for j in range(4))
-        self.Fc = s[3 + 4 * n:3 + 4 * n + m].copy()
-
+        self.t0, self.k, m, nc = float(s[0]), int(s[1]), int(s[2]), int(s[3])
+        self.q, self.v, self.a, self.F = (s[4 + j * n:4 + (j + 1) * n].copy() for j in range(4))
+        self.Fc = s[4 + 4 * n:4 + 4 * n + m].copy()
+        if nc < 0:
+            self._cand = None
+        else:
+            cand = s[4 + 4 * n + m:4 + 4 * n + m + nc].astype(int)
+            bal = self.model.ballast
+            self._cand, self._Dc = cand, self._D[cand]
+            self._kc, self._cc, self._gc = bal.k[cand], bal.c[cand], bal.gap[cand]
 
 # ---------------------------------------------------------------------- moving loads
 @dataclass

@@ -66,7 +66,7 @@ class Body:
         return self.origin + self.fom.s
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class PointMap:
     """Vertical displacement of one material point as a linear map of q.
 
@@ -282,8 +282,10 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
         seat_s = np.array([st.x - r.x_start for st in r.seats])
         fom = beam_body(r.name, mesh_line(L, seat_s, red.element_length), r.profile)
         bnodes = [fom.node(s) for s in seat_s]
-        bdofs = [2 * i for i in bnodes]
-        keys = [(r.name, 2 * i) for i in bnodes]
+        # deflection and rotation at every seat: the fixed-interface modes are then local
+        # to one span (clamped-clamped) and the reduced rail matrices banded
+        bdofs = [2 * i + d for i in bnodes for d in (0, 1)]
+        keys = [(r.name, dof) for dof in bdofs]
         for end, node in (("start", 0), ("end", fom.s.size - 1)):
             if (r.name, end) in joint_ends:
                 for d in (2 * node, 2 * node + 1):
