@@ -45,11 +45,12 @@ def timed(scenario, backend, fmu_dir, algorithm=None):
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="0.05 s runs only (smoke test)")
+    ap.add_argument("--libcosim-only", action="store_true", help="only the libcosim comparison")
     args = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        cases = [("default scenario", [])]
-        if not args.quick:
+        cases = [] if args.libcosim_only else [("default scenario", [])]
+        if not args.quick and not args.libcosim_only:
             cases.append(("1 s simulated (64-sleeper panel)", ONE_SECOND))
         for label, over in cases:
             if args.quick:
@@ -70,11 +71,42 @@ def main() -> None:
     for r in rows:
         lines.append(f"| {r[0]} | {r[1]} | {r[2]:g} | {r[3]} | {r[4]:.3f} | {r[5]} | {r[6]:.2f} | {r[7]:.2f} | "
                      f"{r[8]:.1f} | {r[9]:.0f} |")
+    # our orchestrator vs libcosim: the same FMUs (the exported SSP), Jacobi, same step
+    lib = None
+    try:
+        import libcosimpy  # noqa: F401
+        lib = True
+    except ImportError:
+        print("libcosimpy not installed: the libcosim comparison is skipped")
+    if lib:
+        from orchestrator.ssp import export_ssp, run_ssp_libcosim
+        over = ["simulation.algorithm=jacobi"] + (["simulation.duration=0.05"] if args.quick else [])
+        sc = load_scenario(DEFAULT, over)
+        with tempfile.TemporaryDirectory() as tmp:
+            ssp = export_ssp(sc, Path(tmp) / "system.ssp")
+            t0 = time.perf_counter()
+            out = run_ssp_libcosim(ssp, sc.simulation.step, sc.simulation.duration, ["track.wheel1_Fz"],
+                                   output_every=sc.simulation.output_every)
+            t_lib = time.perf_counter() - t0
+            fmu_dir = Path(tmp) / "fmus"
+            from orchestrator.build_job import build_fmus
+            build_fmus(sc, fmu_dir)
+            t0 = time.perf_counter()
+            r = run_cosim(sc, backend="fmu", fmu_dir=fmu_dir, record_states=False)
+            t_our = time.perf_counter() - t0
+        peak_lib, peak_our = float(out["track.wheel1_Fz"].max()), float(r.Fz[:, 0].max())
+        rows_lib = (f"\nlibcosim vs our orchestrator, default scenario, jacobi, step {sc.simulation.step:g} s: "
+                    f"libcosim {t_lib:.2f} s wall (incl. loading), ours {t_our:.2f} s (incl. instantiation); "
+                    f"ratio ours/libcosim {t_our / t_lib:.2f}; peak wheel-1 force libcosim {peak_lib:.1f} N, "
+                    f"ours {peak_our:.1f} N")
+        print(rows_lib)
     by = {(r[0], r[1]): r for r in rows}
     for label, _ in cases:
         if (label, "fmu") in by and (label, "inprocess") in by:
             lines.append(f"\nFMU / in-process loop time, {label}: "
                          f"{by[(label, 'fmu')][6] / by[(label, 'inprocess')][6]:.2f}")
+    if lib:
+        lines.append(rows_lib)
     text = "\n".join(lines)
     print(text)
     stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")

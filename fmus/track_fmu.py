@@ -68,7 +68,8 @@ UNITS.setdefault("N/m2", {"kg": 1, "m": -1, "s": -2})
 RESOURCE_FILE = "track_fmu.json"   # in the FMU's resources folder
 RESOURCE_FORMAT = "xpanel-track-fmu/1"
 N_VOID_GAPS = 6                    # gaps at 6 equidistant points along a sleeper (DESIGN §3)
-STEP_RTOL = 1e-12                  # step sizes closer than this (relative) count as equal
+STEP_RTOL = 1e-9                   # step sizes closer than this (relative) count as equal: libcosim
+                                   # converts its integer-ns clock and hands over h(1 + 1e-12)
 SIDE = ("left", "right")
 RUN_DEFAULTS = {"speed": 33.333, "static_wheel_load": 98100.0, "extrapolate": True,
                 "auto_offset": True, "record_every": 0}   # DESIGN §4.2 example: 120 km/h, 20 t axle
