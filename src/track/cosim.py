@@ -127,10 +127,11 @@ class TrackCosim:
 
     def _points(self, x: np.ndarray):
         pts, surf = [], []
-        for i in range(self.n):
-            body = self.model.layout.running_body(self.sides[i], x[i])
-            pts.append(self.model.point(body, x[i]))
-            surf.append(self.surfaces(i, x[i], body))
+        running, point = self.model.layout.running_body, self.model.point
+        for i, xi in enumerate(x.tolist()):
+            body = running(self.sides[i], xi)
+            pts.append(point(body, xi))
+            surf.append(self.surfaces(i, xi, body))
         return pts, surf
 
     # ------------------------------------------------------------------ stepping

@@ -42,9 +42,9 @@ from .contact import HERTZ_CONSTANT, hertz
 from .model import PointMap, TrackModel
 
 ALPHA_DEFAULT = -0.05   # slight numerical damping of modes far above the cut-off
-NONLINEAR_MARGIN = 1e-3  # m: a closed bushing this deep cannot open within CANDIDATE_REFRESH steps
-CANDIDATE_REFRESH = 10   # steps between updates of the set of possibly nonlinear bushings
-                         # (a sleeper would need ~2 m/s to move 1 mm in 10 steps of 50 us)
+MOTION_SAFETY = 4.0      # a bushing is checked when its compression is within this many times
+                         # its predicted motion over the step (|v| h + |a| h^2) of the damping onset
+MOTION_FLOOR = 1e-6      # m: ... plus this
 CONTACT_NEWTON_MAX = 30  # Newton iterations of the contact forces within one pass
 CONTACT_TOL = 1e-6       # N: Newton stops when the contact force update is below this ...
 CONTACT_REL_TOL = 1e-9   # ... plus this times the largest wheel force (1e-4 N on 100 kN)
@@ -138,7 +138,6 @@ class TrackIntegrator:
         self.Fc = np.array([-ld.force for ld in loads0 if not callable(ld.force)], dtype=float)
         self._influence_cache: dict = {}
         self._Zb = None
-        self._cand = None
         self._rhs_const = (1.0 + self.alpha) * model.f_gravity
         # initial acceleration from the equation of motion
         r = self.F - self._Ct @ self.v - self._Kt @ self.q
@@ -152,14 +151,17 @@ class TrackIntegrator:
         bal = self.model.ballast
         return bal.forces(qD, vD) + bal.k * qD + bal.c * vD
 
-    def _nonlinear_bushings(self, q: np.ndarray) -> np.ndarray:
+    def _nonlinear_bushings(self) -> np.ndarray:
         """Ballast bushings whose correction can be non-zero within the next step.
 
-        A bushing without gap, closed deeper than ``NONLINEAR_MARGIN``, stays linear
-        (correction exactly zero) unless its sleeper moves that far in one step.
+        A bushing without gap whose compression exceeds the damping onset by several
+        times its motion over one step stays linear through the step (correction
+        exactly zero up to round-off); the others are evaluated.
         """
-        bal = self.model.ballast
-        return np.flatnonzero((bal.gap > 0.0) | (q[self._D] + bal.gap > -NONLINEAR_MARGIN))
+        bal, D, h = self.model.ballast, self._D, self.h
+        delta = -self.q[D] - bal.gap
+        reach = MOTION_SAFETY * (np.abs(self.v[D]) * h + np.abs(self.a[D]) * h * h) + MOTION_FLOOR
+        return np.flatnonzero((bal.gap > 0.0) | (delta < DAMPING_ONSET + reach))
 
     def _forces(self, q: np.ndarray, v: np.ndarray, loads: Sequence[PointLoad]) -> np.ndarray:
         """Right-hand side F = f_gravity + point forces + ballast correction."""
@@ -280,8 +282,7 @@ class TrackIntegrator:
         qp = q0 + h * v0 + (0.5 - b) * h * h * acc0
         vp = v0 + (1 - g) * h * acc0
         rhs = self._rhs_const - a_ * self.F - self._Ct @ (a1 * vp - a_ * v0) - self._Kt @ (a1 * qp - a_ * q0)
-        if self._cand is None or self.k % CANDIDATE_REFRESH == 0:
-            self._set_candidates(q0)
+        self._set_candidates()
         Dc, cand = self._Dc, self._cand
         qD = qp[Dc] + bh2 * acc0[Dc]
         vD = vp[Dc] + gh * acc0[Dc]
@@ -303,11 +304,12 @@ class TrackIntegrator:
         res = [p.residual for p in points]
         zw = z_wheel.tolist() if isinstance(z_wheel, np.ndarray) else [float(z) for z in z_wheel]
         Fc_arr = np.array(Fc)
+        w_pred = [float(p.weights @ qp[p.gidx]) for p in points]
         ctol = CONTACT_TOL + CONTACT_REL_TOL * max(max(Fc, default=0.0), 1.0)
         ftol = FORCE_TOL + REL_FORCE_TOL * max(max(Fc, default=0.0), 1.0)
         out = np.zeros((m, 4))
         for it in range(1, MAX_ITER + 1):
-            w_lin = [float(p.weights @ (qp[p.gidx] + bh2 * acc_lin[p.gidx])) for p in points]
+            w_lin = [wp + bh2 * float(p.weights @ acc_lin[p.gidx]) for wp, p in zip(w_pred, points)]
             Fn = list(Fc)
             # Newton on Fc = hertz(w(Fc)); the wheels couple weakly through G, so each
             # sweep updates every wheel with its own diagonal Jacobian (Jacobi-Newton)
@@ -360,8 +362,8 @@ class TrackIntegrator:
         out[:, 0] = Fc  # the converged forces (equal to hertz(w) within CONTACT_TOL)
         return out
 
-    def _set_candidates(self, q: np.ndarray) -> None:
-        cand = self._nonlinear_bushings(q)
+    def _set_candidates(self) -> None:
+        cand = self._nonlinear_bushings()
         bal = self.model.ballast
         self._cand, self._Dc = cand, self._D[cand]
         self._kc, self._cc, self._gc = bal.k[cand], bal.c[cand], bal.gap[cand]
@@ -389,28 +391,15 @@ class TrackIntegrator:
                 float(point.weights @ self.v[point.gidx]))
 
     def get_state(self) -> np.ndarray:
-        """Full internal state as one flat array (for FMU state save/restore).
-
-        Includes the current set of possibly nonlinear ballast bushings, so that a
-        restored integrator continues bit for bit.
-        """
-        cand = np.zeros(0) if self._cand is None else self._cand.astype(float)
-        return np.concatenate([[self.t0, self.k, self.Fc.size, -1 if self._cand is None else cand.size],
-                               self.q, self.v, self.a, self.F, self.Fc, cand])
+        """Full internal state as one flat array (for FMU state save/restore)."""
+        return np.concatenate([[self.t0, self.k, self.Fc.size], self.q, self.v, self.a, self.F, self.Fc])
 
     def set_state(self, state: np.ndarray) -> None:
         n = self.model.n
         s = np.asarray(state, dtype=float)
-        self.t0, self.k, m, nc = float(s[0]), int(s[1]), int(s[2]), int(s[3])
-        self.q, self.v, self.a, self.F = (s[4 + j * n:4 + (j + 1) * n].copy() for j in range(4))
-        self.Fc = s[4 + 4 * n:4 + 4 * n + m].copy()
-        if nc < 0:
-            self._cand = None
-        else:
-            cand = s[4 + 4 * n + m:4 + 4 * n + m + nc].astype(int)
-            bal = self.model.ballast
-            self._cand, self._Dc = cand, self._D[cand]
-            self._kc, self._cc, self._gc = bal.k[cand], bal.c[cand], bal.gap[cand]
+        self.t0, self.k, m = float(s[0]), int(s[1]), int(s[2])
+        self.q, self.v, self.a, self.F = (s[3 + j * n:3 + (j + 1) * n].copy() for j in range(4))
+        self.Fc = s[3 + 4 * n:3 + 4 * n + m].copy()
 
 # ---------------------------------------------------------------------- moving loads
 @dataclass
