@@ -32,6 +32,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import UserInputError
+from .scenario import PortMap
 
 POSITION_TOL = 1e-6  # m: the vehicle's wheel 1 must start where the scenario puts it
 START_MARGIN_SLEEPERS = 2  # the rear wheelset starts this many sleepers inside the panel
@@ -226,23 +227,10 @@ class RealPort:
                              f"(values {np.array2string(np.asarray(values), precision=4)})")
 
 
-@dataclass(frozen=True)
-class Port:
-    """One wheel of a vehicle FMU in our convention (names + signs, DESIGN.md §4.4)."""
-
-    x: str
-    z: str
-    vz: str
-    Fz: str
-    z_sign: int = 1
-    vz_sign: int = 1
-    Fz_sign: int = 1
-
-
 class FmuVehicle:
     """A vehicle FMU (ours or a third party's) seen in our convention."""
 
-    def __init__(self, path: Path, ports: list[Port], params: dict, start_values: dict):
+    def __init__(self, path: Path, ports: list[PortMap], params: dict, start_values: dict):
         self.unit = FmuUnit(path, "vehicle", {**params, **start_values})
         self.n = len(ports)
         self._x = self.unit.real_port([p.x for p in ports])
@@ -433,8 +421,8 @@ def check_passage(scenario, layout, x_front: float) -> None:
                              f"({layout.sleepers[0].x:.2f} m)")
 
 
-def our_ports(n: int) -> list[Port]:
-    return [Port(f"wheel{i}_x", f"wheel{i}_z", f"wheel{i}_vz", f"wheel{i}_Fz") for i in range(1, n + 1)]
+def our_ports(n: int) -> list[PortMap]:
+    return [PortMap(f"wheel{i}_x", f"wheel{i}_z", f"wheel{i}_vz", f"wheel{i}_Fz") for i in range(1, n + 1)]
 
 
 def make_units(scenario, backend: str, algorithm: str, h: float, record_every: int, fmu_dir: Path | None,
@@ -461,7 +449,7 @@ def make_units(scenario, backend: str, algorithm: str, h: float, record_every: i
     fmus = build_fmus(scenario, fmu_dir or work_dir / "fmus")
     if kind == "external":
         vpath = Path(veh.fmu)
-        ports = [Port(p.x, p.z, p.vz, p.Fz, p.z_sign, p.vz_sign, p.Fz_sign) for p in veh.ports]
+        ports = list(veh.ports)
         params = {}
     else:
         vpath = fmus[kind]
