@@ -16,6 +16,8 @@ front wheelset left, right, then the next:
           ``wheel{i}_vz`` [m/s]  its velocity
 * outputs ``wheel{i}_Fz`` [N]    contact force on the wheel, upward + (initial="approx",
                                  start value = ``static_wheel_load``)
+          ``wheel{i}_Fz_coupling`` [N]  the force to feed the vehicle: ``wheel{i}_Fz``, or with
+                                 ``extrapolate_force`` extrapolated to the next step's middle
           ``wheel{i}_Fz_rail`` [N]  part carried by the running / wing rail
           ``wheel{i}_Fz_nose`` [N]  part carried by the crossing nose
           ``wheel{i}_rail_z`` [m]   rail deflection under the wheel, upward + (0 until the first step)
@@ -27,7 +29,7 @@ front wheelset left, right, then the next:
   ``pad_stiffness`` [N/m], ``ballast_stiffness_per_length`` [N/m2] (N/m per m),
   ``void_sleeper`` (Integer; -1: no change; else the void under that sleeper is
   added or replaced by ``void_gap_1`` .. ``void_gap_6`` [m]), ``extrapolate``,
-  ``auto_offset`` (Boolean), ``record_every`` (Integer, 0: no recording); and,
+  ``extrapolate_force``, ``auto_offset`` (Boolean), ``record_every`` (Integer, 0: no recording); and,
   tunable, ``record_file`` (String, read at terminate: if not empty the recorded
   states are written there as ``.npz``).
 
@@ -72,7 +74,7 @@ STEP_RTOL = 1e-9                   # step sizes closer than this (relative) coun
                                    # converts its integer-ns clock and hands over h(1 + 1e-12)
 SIDE = ("left", "right")
 RUN_DEFAULTS = {"speed": 33.333, "static_wheel_load": 98100.0, "extrapolate": True,
-                "auto_offset": True, "record_every": 0}   # DESIGN §4.2 example: 120 km/h, 20 t axle
+                "auto_offset": True, "record_every": 0, "extrapolate_force": True}   # DESIGN §4.2 example: 120 km/h, 20 t axle
 
 
 def resource_payload(params: "_params.TrackParams", n_wheels: int, **defaults: Any) -> bytes:
@@ -105,7 +107,8 @@ def resource_payload(params: "_params.TrackParams", n_wheels: int, **defaults: A
                             "static_wheel_load": float(values["static_wheel_load"]),
                             "extrapolate": bool(values["extrapolate"]),
                             "auto_offset": bool(values["auto_offset"]),
-                            "record_every": int(values["record_every"])}}
+                            "record_every": int(values["record_every"]),
+                            "extrapolate_force": bool(values["extrapolate_force"])}}
     return json.dumps(payload, indent=1).encode("utf-8")
 
 
@@ -173,6 +176,10 @@ class Track(CosimSlave):
         self.add_parameter("extrapolate", "true: inputs are start-of-step values, extrapolated with vz and "
                            "speed (Jacobi hosts); false: end-of-step values (Gauss-Seidel, vehicle first)",
                            "-", *self._accessors("extrapolate", bool), boolean=True)
+        self.add_parameter("extrapolate_force", "true: wheel{i}_Fz_coupling is the contact force "
+                           "extrapolated to the middle of the next step (second-order coupling for a "
+                           "vehicle that holds its input); false: equal to wheel{i}_Fz", "-",
+                           *self._accessors("extrapolate_force", bool), boolean=True)
         self.add_parameter("auto_offset", "keep the difference between the vehicle's first wheel_z and the "
                            "track's static wheel position as an offset (no drop transient)", "-",
                            *self._accessors("auto_offset", bool), boolean=True)
@@ -199,6 +206,11 @@ class Track(CosimSlave):
                 f"wheel{i + 1}_Fz", f"vertical contact force on wheel {i + 1} ({label}), upward +; "
                 "static_wheel_load until the first step", "N", lambda i=i: self._output("Fz", i),
                 ("static_wheel_load",))
+            self._add_output_with_start(
+                f"wheel{i + 1}_Fz_coupling", f"vertical contact force for the input of wheel {i + 1} "
+                f"({label}): wheel{i + 1}_Fz, extrapolated to the middle of the next communication step "
+                "when extrapolate_force; connect it to the vehicle", "N",
+                lambda i=i: self._output("coupling", i), ("static_wheel_load",))
             self.add_output(f"wheel{i + 1}_Fz_rail", f"contact force of wheel {i + 1} ({label}) on the "
                             "running or wing rail", "N", lambda i=i: self._output("rail", i),
                             ("static_wheel_load",))
@@ -247,11 +259,13 @@ class Track(CosimSlave):
     def _output(self, which: str, i: int) -> float:
         c = self._cosim
         if c is None:  # before the first step: the static state's contact forces
-            if which in ("Fz", "rail"):
+            if which in ("Fz", "rail", "coupling"):
                 return float(self._values["static_wheel_load"])
             return 0.0
         if which == "Fz":
             return float(c.Fz[i])
+        if which == "coupling":
+            return float(c.Fz_coupling[i])
         if which == "rail":
             return float(c.parts[i, 0])
         if which == "nose":
@@ -304,7 +318,8 @@ class Track(CosimSlave):
         v = self._values
         return _cosim.TrackCosim(self._built, self._n, v["static_wheel_load"], h, speed=v["speed"],
                                  extrapolate=v["extrapolate"], auto_offset=v["auto_offset"],
-                                 record_every=v["record_every"], model=self._model)
+                                 record_every=v["record_every"], model=self._model,
+                                 extrapolate_force=v["extrapolate_force"])
 
     # ----------------------------------------------------------------- lifecycle
     def initialize_model(self) -> None:
@@ -388,5 +403,6 @@ class Track(CosimSlave):
     def _same_settings(self, c: "_cosim.TrackCosim", h: float) -> bool:
         v = self._values
         return (c.h == h and c.speed == v["speed"] and c.extrapolate == v["extrapolate"]
+                and c.extrapolate_force == v["extrapolate_force"]
                 and c.auto_offset == v["auto_offset"] and c.record_every == v["record_every"]
                 and np.all(c.Q0 == v["static_wheel_load"]))

@@ -37,7 +37,8 @@ def build_fmus(scenario, out_dir: Path) -> dict[str, Path]:
     veh, sim = scenario.vehicle, scenario.simulation
     extrapolate = INPUTS_AT_START.get(sim.algorithm, False) and sim.extrapolation
     built = {"track": build_track_fmu(scenario.track, n_wheels(scenario), out_dir, speed=veh.speed,
-                                      static_wheel_load=0.5 * veh.axle_load, extrapolate=extrapolate)}
+                                      static_wheel_load=0.5 * veh.axle_load, extrapolate=extrapolate,
+                                      extrapolate_force=sim.extrapolation)}
     for kind in VEHICLE_KINDS:
         built[kind] = build_fmu(kind, out_dir)
     return built

@@ -14,12 +14,17 @@ FMU mapped through the scenario's ``ports``) through FMPy's low-level API;
 Algorithms (registry :data:`ALGORITHMS`), fixed communication step ``h`` counted by
 an integer (``t_k = t0 + k h``):
 
-- ``gauss-seidel`` (vehicle first): the vehicle steps with ``Fz(t_k)`` held over the
+- ``gauss-seidel`` (vehicle first): the vehicle steps with the force held over the
   step; the track then receives the wheel motion at ``t_{k+1}`` and solves the contact
-  at ``t_{k+1}`` implicitly with the track (no extrapolation needed: DESIGN.md §8);
+  at ``t_{k+1}`` implicitly with the track (DESIGN.md §8);
 - ``jacobi``: both units step from the values at ``t_k``; with ``extrapolation`` the
   track extrapolates the wheel position over the step with ``vz`` (and ``x`` with the
   speed), without it it holds them.
+
+With ``extrapolation`` (both algorithms) the vehicle's force input is the track's
+``Fz_coupling``: the contact force extrapolated to the middle of the step, so the
+held input integrates to second order (the track FMU computes it, so a host such as
+libcosim running the exported SSP does exactly the same).
 """
 from __future__ import annotations
 
@@ -99,20 +104,23 @@ class InProcessVehicle:
 class InProcessTrack:
     """:class:`track.cosim.TrackCosim` stepped directly."""
 
-    def __init__(self, scenario, n_wheels: int, h: float, extrapolate: bool, record_every: int):
+    def __init__(self, scenario, n_wheels: int, h: float, extrapolate: bool, record_every: int,
+                 extrapolate_force: bool):
         from track.cosim import TrackCosim
         from track.model import build_track
 
         self.model = build_track(scenario.track)
         self.engine = TrackCosim(scenario.track, n_wheels, 0.5 * scenario.vehicle.axle_load, h,
                                  speed=scenario.vehicle.speed, extrapolate=extrapolate,
-                                 record_every=record_every, model=self.model)
+                                 record_every=record_every, model=self.model,
+                                 extrapolate_force=extrapolate_force)
 
     def step(self, t: float, h: float, x, z, vz) -> None:
         self.engine.do_step(x, z, vz)
 
     def forces(self) -> np.ndarray:
-        return self.engine.Fz
+        """The vehicle's input: the contact forces, extrapolated when asked."""
+        return self.engine.Fz_coupling
 
     def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         e = self.engine
@@ -265,7 +273,7 @@ class FmuTrack:
         self._in = self.unit.real_port([f"wheel{i}_{s}" for s in ("x", "z", "vz") for i in w])
         self._out = self.unit.real_port([f"wheel{i}_{s}" for s in ("Fz", "Fz_rail", "Fz_nose", "rail_z")
                                          for i in w])
-        self._Fz = self.unit.real_port([f"wheel{i}_Fz" for i in w])
+        self._Fz = self.unit.real_port([f"wheel{i}_Fz_coupling" for i in w])
         self.n = n_wheels
         self._inbuf = np.empty(3 * n_wheels)
 
@@ -280,7 +288,7 @@ class FmuTrack:
         self.unit.do_step(t, h)
 
     def forces(self) -> np.ndarray:
-        """The coupling outputs only (read every step; the rest at output steps)."""
+        """The vehicle's input only (read every step; the rest at output steps)."""
         return self._Fz.get().copy()
 
     def outputs(self):
@@ -434,12 +442,14 @@ def make_units(scenario, backend: str, algorithm: str, h: float, record_every: i
     x0 = start_position(scenario, layout)
     check_passage(scenario, layout, x0)
     extrapolate = INPUTS_AT_START[algorithm] and sim.extrapolation
+    # the monolithic reference iterates the forces itself: no extrapolation there
+    extrapolate_force = sim.extrapolation and algorithm != "implicit"
     if backend == "inprocess":
         if kind == "external":
             raise UserInputError("vehicle.fmu: a third-party FMU needs the fmu backend")
         hold = "foh" if algorithm == "implicit" else "zoh"
         return (InProcessVehicle(kind, veh.speed, veh.axle_load, x0, veh.start_values, hold),
-                InProcessTrack(scenario, m, h, extrapolate, record_every), x0)
+                InProcessTrack(scenario, m, h, extrapolate, record_every, extrapolate_force), x0)
     if algorithm == "implicit":
         raise UserInputError("the implicit (monolithic) reference runs in-process only")
     if backend != "fmu":
@@ -459,6 +469,7 @@ def make_units(scenario, backend: str, algorithm: str, h: float, record_every: i
     rec = work_dir / "track_record.npz"
     track = FmuTrack(fmus["track"], m, {"speed": veh.speed, "static_wheel_load": 0.5 * veh.axle_load,
                                          "extrapolate": extrapolate, "record_every": record_every,
+                                         "extrapolate_force": extrapolate_force,
                                          "record_file": str(rec) if record_every else ""})
     track.record_file = rec
     return vehicle, track, x0
@@ -540,13 +551,12 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
         for k in range(nsteps):
             t = t0 + k * h  # communication points from an integer counter
             step_fn(vehicle, track, t, h, Fz)
-            if (k + 1) % every:
-                Fz = track.forces()
-            else:
-                Fz, parts, rail_z = track.outputs()
+            Fz = track.forces()
+            if (k + 1) % every == 0:
+                Fz_rec, parts, rail_z = track.outputs()
                 j = (k + 1) // every
                 x, z, vz = vehicle.outputs()
-                T[j], X[j], Z[j], VZ[j], F[j], P[j], RZ[j] = t0 + (k + 1) * h, x, z, vz, Fz, parts, rail_z
+                T[j], X[j], Z[j], VZ[j], F[j], P[j], RZ[j] = t0 + (k + 1) * h, x, z, vz, Fz_rec, parts, rail_z
                 done = j + 1
                 if progress is not None:
                     progress(k + 1, nsteps)

@@ -21,7 +21,8 @@ right, then the next), four connections::
     vehicle.wheel{i}_x  -> track.wheel{i}_x
     vehicle.wheel{i}_z  -> track.wheel{i}_z      (x z_sign  for a third-party vehicle)
     vehicle.wheel{i}_vz -> track.wheel{i}_vz     (x vz_sign)
-    track.wheel{i}_Fz   -> vehicle.wheel{i}_Fz   (x Fz_sign)
+    track.wheel{i}_Fz_coupling -> vehicle.wheel{i}_Fz   (x Fz_sign; the contact force,
+                                 extrapolated to mid-step with extrapolate_force)
 
 A third-party vehicle uses its own variable names from ``vehicle.ports``. A sign of -1
 becomes an ``ssc:LinearTransformation factor="-1"`` on that connection: the FMU's
@@ -254,8 +255,9 @@ def system_connections(scenario) -> list[Connection]:
         out += [Connection(VEHICLE, x, TRACK, w + "x"),
                 Connection(VEHICLE, z, TRACK, w + "z", float(sz)),
                 Connection(VEHICLE, vz, TRACK, w + "vz", float(svz)),
-                # our Fz = FMU Fz * sign  ->  FMU Fz = our Fz / sign = our Fz * sign
-                Connection(TRACK, w + "Fz", VEHICLE, fz, float(sfz))]
+                # our Fz = FMU Fz * sign  ->  FMU Fz = our Fz / sign = our Fz * sign; the
+                # coupling output (extrapolated to mid-step when extrapolate_force) feeds it
+                Connection(TRACK, w + "Fz_coupling", VEHICLE, fz, float(sfz))]
     return out
 
 
@@ -278,6 +280,7 @@ def track_parameters(scenario) -> dict:
     t, v = scenario.track, scenario.vehicle
     return {"speed": float(v.speed), "static_wheel_load": 0.5 * float(v.axle_load),
             "extrapolate": bool(scenario.simulation.extrapolation),
+            "extrapolate_force": bool(scenario.simulation.extrapolation),
             "h1": float(t.ballast.stiffness_scale), "h2": float(t.rail_pad.stiffness_scale),
             "impact_angle": float(t.impact_angle)}
 
@@ -320,7 +323,7 @@ def _track_fmu(scenario, n_wheels: int, fmu_dir: Path | None, tmp: Path) -> Path
     from fmus.build import build_track_fmu
 
     values = track_parameters(scenario)
-    defaults = {k: values[k] for k in ("speed", "static_wheel_load", "extrapolate")}
+    defaults = {k: values[k] for k in ("speed", "static_wheel_load", "extrapolate", "extrapolate_force")}
     return Path(build_track_fmu(scenario.track, n_wheels, Path(fmu_dir) if fmu_dir is not None else tmp,
                                 **defaults))
 

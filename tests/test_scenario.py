@@ -92,9 +92,9 @@ def test_default_scenario_maps_onto_dataclasses(default_scenario):
     assert s.vehicle.builtin and s.vehicle.ports == ()
     sim = s.simulation
     assert (sim.duration, sim.step, sim.output_step, sim.algorithm, sim.extrapolation) == \
-        (0.5, 5.0e-5, 1.0e-4, "gauss-seidel", True)
-    assert sim.output_every == 2
-    assert sim.n_steps == 10000
+        (0.5, 1.0e-4, 1.0e-4, "gauss-seidel", True)
+    assert sim.output_every == 1
+    assert sim.n_steps == 5000
     assert s.sensors is None
 
     # Keys the file leaves out take the dataclass defaults.

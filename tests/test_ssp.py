@@ -157,7 +157,7 @@ def test_connections_join_existing_outputs_to_inputs(ssp_file, tmp_path):
     for i in range(1, 5):
         w = f"wheel{i}_"
         expected += [(("vehicle", w + q), ("track", w + q)) for q in ("x", "z", "vz")]
-        expected.append((("track", w + "Fz"), ("vehicle", w + "Fz")))
+        expected.append((("track", w + "Fz_coupling"), ("vehicle", w + "Fz")))
     assert sorted(ends) == sorted(expected)
     # every input of both FMUs is driven
     for comp, vs in variables.items():
@@ -169,7 +169,8 @@ def test_parameters_and_experiment(ssp_file, scenario):
     system = read_ssp(ssp_file)
     veh, sim = scenario.vehicle, scenario.simulation
     assert system.parameters["track"] == {"speed": veh.speed, "static_wheel_load": veh.axle_load / 2,
-                                          "extrapolate": True, "h1": 1.0, "h2": 1.0, "impact_angle": 0.006}
+                                          "extrapolate": True, "extrapolate_force": True, "h1": 1.0,
+                                          "h2": 1.0, "impact_angle": 0.006}
     # front wheelset: wheelbase (2.5 m) + 2 spacings after sleeper 0 (at x = 0 on plain track)
     assert system.parameters["vehicle"] == {"speed": veh.speed, "axle_load": veh.axle_load,
                                             "x0": pytest.approx(2.5 + 2 * 0.6, abs=1e-12)}
@@ -236,7 +237,8 @@ def libcosim_run(ssp_file, scenario):
     _libcosimpy()
     sim = scenario.simulation
     return run_ssp_libcosim(ssp_file, sim.step, sim.duration,
-                            FZ + ["vehicle.wheel1_Fz", "vehicle.wheel1_z", "track.wheel1_rail_z",
+                            FZ + ["vehicle.wheel1_Fz", "track.wheel1_Fz_coupling", "vehicle.wheel1_z",
+                                  "track.wheel1_rail_z",
                                   "vehicle.wheel1_x", "vehicle.wheel3_x"])
 
 
@@ -254,9 +256,9 @@ def test_libcosim_runs_the_ssp(libcosim_run, scenario):
     np.testing.assert_allclose(res["vehicle.wheel1_x"], x0 + veh.speed * res["time"], rtol=1e-12)
     np.testing.assert_allclose(res["vehicle.wheel3_x"], x0 - 2.5 + veh.speed * res["time"], rtol=1e-12)
     assert np.all(res["track.wheel1_rail_z"] < -1e-4)
-    # Jacobi: the force the vehicle used over step k is the track's output at the start of
-    # the step (k = 0: the track's start value, the static wheel load)
-    np.testing.assert_array_equal(res["vehicle.wheel1_Fz"][1:], res["track.wheel1_Fz"][:-1])
+    # Jacobi: the force the vehicle used over step k is the track's coupling output at the
+    # start of the step (k = 0: the track's start value, the static wheel load)
+    np.testing.assert_array_equal(res["vehicle.wheel1_Fz"][1:], res["track.wheel1_Fz_coupling"][:-1])
     assert res["vehicle.wheel1_Fz"][0] == q0
 
 
@@ -392,7 +394,7 @@ def test_third_party_vehicle_sign_flips(c_vehicle_fmu, tmp_path):
         assert got == got | {("vehicle", "axle1.s", "track", w + "x"): 1.0,
                              ("vehicle", f"axle1.z{side}", "track", w + "z"): -1.0,
                              ("vehicle", f"axle1.vz{side}", "track", w + "vz"): -1.0,
-                             ("track", w + "Fz", "vehicle", f"axle1.F{side}"): -1.0}
+                             ("track", w + "Fz_coupling", "vehicle", f"axle1.F{side}"): -1.0}
     assert len(got) == 8
     # a port name the FMU does not have
     data = third_party_dict(c_vehicle_fmu)
@@ -404,11 +406,11 @@ def test_third_party_vehicle_sign_flips(c_vehicle_fmu, tmp_path):
     sim = s.simulation
     res = run_ssp_libcosim(ssp, sim.step, sim.duration,
                            ["track.wheel1_Fz", "track.wheel2_Fz", "vehicle.axle1.FL", "vehicle.axle1.zL",
-                            "track.wheel1_rail_z"])
+                            "track.wheel1_rail_z", "track.wheel1_Fz_coupling"])
     q0 = s.vehicle.axle_load / 2
     for name in ("track.wheel1_Fz", "track.wheel2_Fz"):
         assert np.max(np.abs(res[name] / q0 - 1.0)) < STATIC_TOL, name
     # the FMU sees its own (downward-positive) convention: the loaded wheel has FL < 0
-    # (the force it used over step k, from the track's output at the start of the step)
-    np.testing.assert_array_equal(res["vehicle.axle1.FL"][1:], -res["track.wheel1_Fz"][:-1])
+    # (the force it used over step k, from the track's coupling output at the start of the step)
+    np.testing.assert_array_equal(res["vehicle.axle1.FL"][1:], -res["track.wheel1_Fz_coupling"][:-1])
     assert np.all(res["track.wheel1_rail_z"] < -1e-4)

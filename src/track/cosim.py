@@ -76,6 +76,12 @@ class TrackCosim:
         already end-of-step values (Gauss–Seidel with the vehicle first).
     auto_offset : bool
         Align the vehicle's static wheel positions with the track's (see module doc).
+    extrapolate_force : bool
+        Also offer ``Fz_coupling``: the contact force extrapolated to the middle of the
+        next communication step, ``1.5 Fz(t_k) - 0.5 Fz(t_k-1)``. A vehicle that holds
+        its force input over a step then integrates it to second order (midpoint rule)
+        instead of first: the coupling error of the peak force at the crossing falls
+        from 1.5 % to 0.3 % at a 100 us step (tests/test_cosim.py).
     record_every : int
         Record the state every this many steps (0: never).
     model : TrackModel, optional
@@ -84,6 +90,7 @@ class TrackCosim:
 
     def __init__(self, params: TrackParams, n_wheels: int, static_wheel_load, h: float, speed: float = 0.0,
                  extrapolate: bool = False, auto_offset: bool = True, record_every: int = 0,
+                 extrapolate_force: bool = False,
                  model: TrackModel | None = None, alpha: float = ALPHA_DEFAULT, c_h: float = HERTZ_CONSTANT):
         self.params = params
         self.model = model if model is not None else build_track(params)
@@ -94,6 +101,7 @@ class TrackCosim:
         self.speed = float(speed)
         self.extrapolate = bool(extrapolate)
         self.auto_offset = bool(auto_offset)
+        self.extrapolate_force = bool(extrapolate_force)
         self.record_every = int(record_every)
         self.alpha = alpha
         self.c_h = c_h
@@ -109,6 +117,8 @@ class TrackCosim:
         self.offset = np.zeros(self.n)
         self.z_static = np.zeros(self.n)
         self.Fz = self.Q0.copy()           # outputs: contact force on each wheel [N]
+        self.Fz_coupling = self.Q0.copy()  # force for the vehicle's input (see extrapolate_force) [N]
+        self._Fz_last = self.Q0.copy()
         self.parts = np.zeros((self.n, 2))  # force on first / second surface [N]
         self.rail_w = np.zeros(self.n)      # rail deflection under each wheel [m]
         self.record = Record()
@@ -179,6 +189,8 @@ class TrackCosim:
         self.Fz = out[:, 0]
         self.parts = out[:, 1:3]
         self.rail_w = out[:, 3]
+        self.Fz_coupling = 1.5 * self.Fz - 0.5 * self._Fz_last if self.extrapolate_force else self.Fz
+        self._Fz_last = self.Fz
         if not (self.Fz < self._limit).all():  # also catches NaN
             i = int(np.argmax(np.where(np.isfinite(self.Fz), self.Fz, np.inf)))
             raise DivergenceError(
@@ -204,6 +216,7 @@ class TrackCosim:
         """Everything that evolves, for FMU state save/restore (arrays copied)."""
         return {"integ": None if self.integ is None else self.integ.get_state(),
                 "offset": self.offset.copy(), "z_static": self.z_static.copy(), "Fz": self.Fz.copy(),
+                "Fz_coupling": self.Fz_coupling.copy(), "Fz_last": self._Fz_last.copy(),
                 "parts": self.parts.copy(), "rail_w": self.rail_w.copy(),
                 "record_len": len(self.record.t)}
 
@@ -216,6 +229,7 @@ class TrackCosim:
             self.integ.set_state(s["integ"])
         self.offset, self.z_static = s["offset"].copy(), s["z_static"].copy()
         self.Fz, self.parts, self.rail_w = s["Fz"].copy(), s["parts"].copy(), s["rail_w"].copy()
+        self.Fz_coupling, self._Fz_last = s["Fz_coupling"].copy(), s["Fz_last"].copy()
         n = s["record_len"]
         for k in ("t", "q", "v", "x", "Fz", "parts"):
             del getattr(self.record, k)[n:]
