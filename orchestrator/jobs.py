@@ -15,27 +15,17 @@ from pathlib import Path
 import numpy as np
 
 from track.frf import receptance
-from track.model import TrackModel, build_track
-from track.post import body_response, sleeper_pressure
+from track.model import build_track
+from track.post import body_response
 from track.statics import static_equilibrium
 
 from . import plots
+from .analysis import analyse, reference_point
 from .errors import UserInputError
 from .plots_layout import plot_layout
 
 FRF_POINTS = 400          # frequencies of a receptance curve
 FRF_FMIN = 5.0            # Hz
-
-
-def _reference(model: TrackModel) -> tuple[str, float, int]:
-    """(crossing-side wheel, x of the crossing transition, transition sleeper index)."""
-    lay = model.layout
-    if lay.x_transition is not None:
-        k = lay.params.transition_sleeper
-        k = len(lay.sleepers) // 2 + 1 if k is None else k
-        return lay.crossing_side, lay.x_transition, k
-    k = len(lay.sleepers) // 2
-    return "left", lay.sleepers[k].x, k
 
 
 def _progress_bar(enabled: bool, total: int, desc: str):
@@ -72,7 +62,6 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     finally:
         close()
     model = build_track(scenario.track)  # the same model (cached bodies) for post-processing
-    side, x_ref, k_tr = _reference(model)
     lay = model.layout
     summary = {
         "scenario": scenario.name, "backend": backend, "algorithm": sim.algorithm,
@@ -88,39 +77,29 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     summary["contact"] = {f"wheel{i + 1}": {"max_Fz": float(np.nanmax(res.Fz[:, i])),
                                             "min_Fz": float(np.nanmin(res.Fz[:, i])),
                                             "delta_Q": float(np.nanmax(res.Fz[:, i]) - Q0)} for i in wheels}
-    crossing_wheels = [i for i in wheels if (i % 2 == 0) == (side == "left")]
-    summary["crossing_side"] = side
-    summary["max_delta_Q_crossing_side"] = max(summary["contact"][f"wheel{i + 1}"]["delta_Q"]
-                                               for i in crossing_wheels)
-    if res.track_record is not None and len(res.track_record.get("t", ())):
-        rec = res.track_record
-        rail_name = lay.running_body(side, x_ref)
-        sl_name = f"sleeper_{k_tr}"
-        loads_t = [[(model.rail_point(s, x), -f) for s, x, f in zip(_sides(len(xs)), xs, fz)]
-                   for xs, fz in zip(rec["x"], rec["Fz"])]
-        rail_hist = np.array([body_response(model, rail_name, q, pts).moment for q, pts in zip(rec["q"], loads_t)])
-        sl_resp = body_response(model, sl_name, rec["q"])
-        y_p, p_t = sleeper_pressure(model, k_tr, rec["q"], rec["v"])
-        j_r, j_s = int(np.argmax(rail_hist.max(axis=1))), int(np.argmax(sl_resp.moment.max(axis=1)))
-        summary.update({
-            "crossing_rail": rail_name, "transition_sleeper": k_tr,
-            "max_rail_moment": float(rail_hist.max()), "time_max_rail_moment": float(rec["t"][j_r]),
-            "max_sleeper_moment": float(sl_resp.moment.max()), "time_max_sleeper_moment": float(rec["t"][j_s]),
-            "max_ballast_pressure_transition": float(p_t.max()),
-        })
-        _write_h5(out_dir / "results.h5", res, rail_name, model.body(rail_name).coords(), rail_hist, sl_name,
-                  sl_resp, y_p, p_t)
-        env_r = np.stack([rail_hist.min(axis=0), rail_hist.max(axis=0)])
-        env_s = np.stack([sl_resp.moment.min(axis=0), sl_resp.moment.max(axis=0)])
-        plots.save(plots.plot_envelopes(model.body(rail_name).coords(), env_r, sl_resp.coord, env_s, y_p,
-                                        p_t.max(axis=0), rail_name, sl_name), out_dir / "envelopes.png")
+    an = analyse(model, Q0, res)
+    summary.update(an.scalars)
+    meta = getattr(an, "meta", None)
+    if meta is not None:
+        rail_name, sl_name = meta["crossing_rail"], f"sleeper_{meta['transition_sleeper']}"
+        summary.update({"crossing_rail": rail_name, "transition_sleeper": meta["transition_sleeper"],
+                        "crossing_side": meta["crossing_side"]})
+        sl, rec = meta["sleeper"], res.track_record
+        j_r, j_s = meta["j_rail"], meta["j_sleeper"]
+        _write_h5(out_dir / "results.h5", res, rail_name, an.arrays["rail_x"], meta["rail_hist"], sl_name,
+                  sl, meta["y_p"], meta["p_t"])
+        plots.save(plots.plot_envelopes(an.arrays["rail_x"], np.stack([an.arrays["rail_M_min"],
+                                                                       an.arrays["rail_M_max"]]),
+                                        sl.coord, np.stack([an.arrays["sleeper_M_min"], an.arrays["sleeper_M_max"]]),
+                                        meta["y_p"], an.arrays["ballast_p_max"], rail_name, sl_name),
+                   out_dir / "envelopes.png")
         inst_r = {f"t = {rec['t'][j_r]:.4f} s (max rail moment)":
-                  body_response(model, rail_name, rec["q"][j_r], loads_t[j_r])}
+                  body_response(model, rail_name, rec["q"][j_r], meta["loads_t"][j_r])}
         inst_s = {f"t = {rec['t'][j_s]:.4f} s (max sleeper moment)": body_response(model, sl_name, rec["q"][j_s])}
-        seat_y = sorted({float(y) for sl, y in zip(model.pads.sleeper, model.pads.y) if sl == k_tr})
         plots.save(plots.plot_body_lines(inst_r, inst_s, f"{scenario.name}: instants of maximum moment",
                                          rail_name, f"{sl_name} (crossing transition)",
-                                         marks_rail=[x_ref], marks_sleeper=seat_y), out_dir / "moments.png")
+                                         marks_rail=[an.arrays["x_transition"][0]],
+                                         marks_sleeper=list(an.arrays["wheel_y"])), out_dir / "moments.png")
     else:
         _write_h5(out_dir / "results.h5", res)
     plots.save(plot_layout(lay), out_dir / "layout.png")
@@ -137,10 +116,6 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     if res.error:
         raise UserInputError(f"{res.error} (results up to t = {res.t[-1]:.4g} s written to {out_dir})")
     return summary
-
-
-def _sides(m: int) -> list[str]:
-    return ["left" if i % 2 == 0 else "right" for i in range(m)]
 
 
 def _write_signals(out_dir: Path, res) -> None:
@@ -187,7 +162,7 @@ def frf_job(scenario, out_dir: Path, at: str | None, fmax: float) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     model = build_track(scenario.track)
-    side, x_ref, _ = _reference(model)
+    side, x_ref, _ = reference_point(model)
     if at is None:
         body, x = model.layout.running_body(side, x_ref), x_ref
     else:

@@ -1,0 +1,112 @@
+"""Post-processing of one co-simulation with the same track model: the quantities of the seeds.
+
+:func:`analyse` turns a :class:`orchestrator.master.CosimResult` into
+- scalars: peak / minimum contact forces, ΔQ = Q_max - Q0 on the crossing side, the
+  maximum bending moment along the crossing rail and along the sleeper under the
+  crossing transition (with their instants), the peak sleeper-ballast pressure under
+  that sleeper, on the crossing side and on the field side (seed 001 Fig. 6);
+- arrays: the deflection and moment lines at those instants (seed 001 Figs. 4, 5, 7),
+  the pressure along the sleeper at the instant of maximum sleeper moment (Fig. 6), the
+  moment envelopes and the wheels' lateral positions on the sleeper.
+
+The crossing side is the side whose wheel passes the nose; the *field side* of the
+transition sleeper is the region around the other wheel's rail seat.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from track.model import TrackModel
+from track.post import body_response, sleeper_pressure
+
+SIDE_WINDOW = 0.3   # m: half-width of the sleeper region under a rail seat for the side pressures
+
+
+@dataclass
+class Analysis:
+    """Scalars (JSON-able floats) and arrays of one run (see module docstring)."""
+
+    scalars: dict = field(default_factory=dict)
+    arrays: dict = field(default_factory=dict)
+
+
+def reference_point(model: TrackModel) -> tuple[str, float, int]:
+    """(crossing-side wheel, x of the crossing transition, transition sleeper index).
+
+    Plain track: the left side and the middle sleeper.
+    """
+    lay = model.layout
+    if lay.x_transition is not None:
+        k = lay.params.transition_sleeper
+        k = len(lay.sleepers) // 2 + 1 if k is None else k
+        return lay.crossing_side, lay.x_transition, k
+    k = len(lay.sleepers) // 2
+    return "left", lay.sleepers[k].x, k
+
+
+def wheel_sides(m: int) -> list[str]:
+    """Side of each wheel (1, 3, ... left)."""
+    return ["left" if i % 2 == 0 else "right" for i in range(m)]
+
+
+def seat_y(model: TrackModel, sleeper: int, side: str) -> float:
+    """Lateral position [m] of the seat of the rail a wheel on ``side`` runs on at that sleeper."""
+    x = model.layout.sleepers[sleeper].x
+    body = model.layout.running_body(side, x)
+    ys = [y for s, r, y in zip(model.pads.sleeper, model.pads.rail, model.pads.y) if s == sleeper and r == body]
+    return float(np.mean(ys))
+
+
+def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
+    """Scalars and arrays of a co-simulation result (needs ``res.track_record``)."""
+    side, x_ref, k_tr = reference_point(model)
+    m = res.Fz.shape[1]
+    sides = wheel_sides(m)
+    Fz = res.Fz[1:] if res.Fz.shape[0] > 1 else res.Fz   # row 0 is the static start
+    out = Analysis()
+    s = out.scalars
+    cross = [i for i in range(m) if sides[i] == side]
+    s["max_Fz"] = float(np.nanmax(Fz[:, cross]))
+    s["min_Fz"] = float(np.nanmin(Fz[:, cross]))
+    s["delta_Q"] = s["max_Fz"] - static_wheel_load
+    s["max_Fz_nose"] = float(np.nanmax(res.parts[1:, cross, 1])) if res.parts.shape[0] > 1 else 0.0
+    rec = res.track_record
+    if rec is None or not len(rec.get("t", ())):
+        return out
+    lay = model.layout
+    rail_name = lay.running_body(side, x_ref)
+    sl_name = f"sleeper_{k_tr}"
+    loads_t = [[(model.rail_point(sd, x), -f) for sd, x, f in zip(sides, xs, fz)]
+               for xs, fz in zip(rec["x"], rec["Fz"])]
+    rail_hist = np.array([body_response(model, rail_name, q, pts).moment for q, pts in zip(rec["q"], loads_t)])
+    sl = body_response(model, sl_name, rec["q"])
+    y_p, p_t = sleeper_pressure(model, k_tr, rec["q"], rec["v"])
+    j_r, j_s = int(np.argmax(rail_hist.max(axis=1))), int(np.argmax(sl.moment.max(axis=1)))
+    y_cross, y_field = seat_y(model, k_tr, side), seat_y(model, k_tr, "right" if side == "left" else "left")
+    near_c, near_f = np.abs(y_p - y_cross) <= SIDE_WINDOW, np.abs(y_p - y_field) <= SIDE_WINDOW
+    s.update({
+        "max_rail_moment": float(rail_hist.max()), "time_max_rail_moment": float(rec["t"][j_r]),
+        "max_sleeper_moment": float(sl.moment.max()), "time_max_sleeper_moment": float(rec["t"][j_s]),
+        "max_ballast_pressure": float(p_t.max()),
+        "max_ballast_pressure_crossing_side": float(p_t[:, near_c].max()),
+        "max_ballast_pressure_field_side": float(p_t[:, near_f].max()),
+        # at the instant of maximum sleeper moment (seed 001 Fig. 6 compares these)
+        "ballast_pressure_crossing_side_at_max_sleeper": float(p_t[j_s, near_c].max()),
+        "ballast_pressure_field_side_at_max_sleeper": float(p_t[j_s, near_f].max()),
+    })
+    rail_at = body_response(model, rail_name, rec["q"][j_r], loads_t[j_r])
+    a = out.arrays
+    a.update({
+        "rail_x": rail_at.coord, "rail_w_at_max": rail_at.w, "rail_M_at_max": rail_at.moment,
+        "rail_M_min": rail_hist.min(axis=0), "rail_M_max": rail_hist.max(axis=0),
+        "sleeper_y": sl.coord, "sleeper_w_at_max": sl.w[j_s], "sleeper_M_at_max": sl.moment[j_s],
+        "sleeper_M_min": sl.moment.min(axis=0), "sleeper_M_max": sl.moment.max(axis=0),
+        "ballast_y": y_p, "ballast_p_at_max_sleeper": p_t[j_s], "ballast_p_max": p_t.max(axis=0),
+        "wheel_y": np.array([y_cross, y_field]), "x_transition": np.array([x_ref]),
+    })
+    out.meta = {"crossing_rail": rail_name, "transition_sleeper": k_tr, "crossing_side": side,
+                "j_rail": j_r, "j_sleeper": j_s, "loads_t": loads_t, "rail_hist": rail_hist, "sleeper": sl,
+                "y_p": y_p, "p_t": p_t}
+    return out
