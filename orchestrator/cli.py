@@ -1,4 +1,5 @@
-"""The ``turnout`` command line: parses arguments and delegates to :mod:`orchestrator.jobs`.
+"""The ``turnout`` command line: parses arguments and delegates to the orchestrator's jobs
+(:mod:`orchestrator.jobs`, ``build_job``, ``ssp``, ``sweep``, ``figures``).
 
 No logic lives here (as in FMPy's ``command_line.py``). User errors
 (:class:`~orchestrator.errors.UserInputError`, which includes
@@ -22,6 +23,7 @@ from .errors import UserInputError, one_line
 PROG = "turnout"
 EXIT_USAGE = 2  # bad input (also argparse's status for usage errors)
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report it
+EXIT_INCOMPLETE = 1  # a sweep ended with runs not finished (failed, or a worker died); rerunning resumes
 RESULTS_DIR = Path("results")  # default parent of --out
 
 
@@ -44,6 +46,16 @@ def _positive_float(text: str) -> float:
     if not (math.isfinite(x) and x > 0):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
     return x
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    return n
 
 
 def _point(text: str) -> str:
@@ -112,6 +124,37 @@ def build_parser() -> argparse.ArgumentParser:
                      help="highest frequency [Hz] (default: the model cut-off track.reduction.f_cut)")
     frf.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>-frf)")
     frf.set_defaults(handler=_cmd_frf)
+
+    swp = sub.add_parser("sweep", help="parameter study: one run per combination of values",
+                         description="Run SCENARIO once per combination of the --vary values (their Cartesian "
+                                     "product) or once per item of a --list file; writes one row per run to "
+                                     "DIR/sweep.csv, the runs' files to DIR/runs/<run id>/ and a plot per result. "
+                                     "Resumable: run the same command again and only unfinished runs are done.")
+    swp.add_argument("scenario", metavar="SCENARIO", type=Path, help="base scenario YAML file")
+    what = swp.add_mutually_exclusive_group(required=True)
+    what.add_argument("--vary", metavar="KEY=V1,V2,...", action="append", dest="vary",
+                      help="values of one scenario key, e.g. --vary vehicle.speed=27.78,33.33 "
+                           "--vary track.crossing.impact_angle=0.006,0.012 (values in YAML; repeatable)")
+    what.add_argument("--list", metavar="FILE.yaml", type=Path, dest="run_list",
+                      help="YAML list of mappings {key.path: value}, one run each")
+    swp.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>-sweep)")
+    swp.add_argument("--workers", metavar="N", type=_positive_int, default=2,
+                     help="local worker processes (default: 2; ignored with --scheduler)")
+    swp.add_argument("--scheduler", metavar="ADDRESS",
+                     help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786 (needs dask[distributed])")
+    swp.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+    swp.set_defaults(handler=_cmd_sweep)
+
+    figs = sub.add_parser("figures", help="regenerate the source papers' figures",
+                          description="Run the seed studies (resumable, on the sweep executor) and write the "
+                                      "figures of seed 001 (Figs. 3-7) and seed 000 (Table 1, beam) into DIR.")
+    figs.add_argument("--study", choices=("seed001", "seed000", "all"), default="all")
+    figs.add_argument("--out", metavar="DIR", type=Path, default=RESULTS_DIR / "figures",
+                      help="output folder (default: results/figures)")
+    figs.add_argument("--workers", metavar="N", type=_positive_int, default=2, help="local worker processes")
+    figs.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster")
+    figs.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+    figs.set_defaults(handler=_cmd_figures)
     return parser
 
 
@@ -161,6 +204,41 @@ def _cmd_frf(args: argparse.Namespace) -> int:
     fmax = args.fmax if args.fmax is not None else scenario.track.reduction.f_cut
     _jobs().frf_job(scenario, out_dir, at=args.at, fmax=fmax)
     print(f"{PROG}: receptance in {out_dir}")
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .scenario import load_scenario
+
+    sweep = importlib.import_module("orchestrator.sweep")
+    if args.run_list is not None:
+        variations = sweep.list_from_file(args.run_list)
+    else:
+        variations = sweep.grid_from_vary(args.vary)
+    out_dir = args.out if args.out is not None else RESULTS_DIR / f"{load_scenario(args.scenario).name}-sweep"
+    try:
+        result = sweep.run_sweep(args.scenario, variations, out_dir, workers=args.workers,
+                                 scheduler=args.scheduler, progress=not args.no_progress)
+    except sweep.SweepIncomplete as exc:
+        print(f"{PROG}: error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    if result.failed:
+        print(f"{PROG}: error: {one_line(result.summary())}", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    print(f"{PROG}: sweep: {result.summary()}")
+    return 0
+
+
+def _cmd_figures(args: argparse.Namespace) -> int:
+    figures = importlib.import_module("orchestrator.figures")
+    sweep = importlib.import_module("orchestrator.sweep")
+    try:
+        files = figures.make_figures(args.out, study=args.study, workers=args.workers, scheduler=args.scheduler,
+                                     progress=not args.no_progress)
+    except sweep.SweepIncomplete as exc:
+        print(f"{PROG}: error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    print(f"{PROG}: figures: {', '.join(p.name for p in files)} in {args.out}")
     return 0
 
 

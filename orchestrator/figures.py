@@ -86,7 +86,8 @@ def seed001_figures(rows: list[dict], run_dir_of, out_dir: Path) -> list[Path]:
     fig.savefig(files[-1], dpi=110)
     plt.close(fig)
     # Figs. 4-6: 200 km/h for the three angles + 10 km/h reference, soft pad
-    cases = [(max(SPEEDS_KMH), a) for a in ANGLES] + [(min(SPEEDS_KMH), ANGLES[0])]
+    speeds = sorted({round(r["vehicle.speed"] / KMH) for r in rows})
+    cases = [(speeds[-1], a) for a in ANGLES] + [(speeds[0], ANGLES[0])]
     data = []
     for kmh, ang in cases:
         r = _pick(rows, round(kmh * KMH, 4), ang, PADS[0])
@@ -136,7 +137,7 @@ def seed001_figures(rows: list[dict], run_dir_of, out_dir: Path) -> list[Path]:
     plt.close(fig)
     # Fig. 7: soft vs stiff pad, worn crossing, 200 and 10 km/h
     fig, ax = plt.subplots(figsize=(8, 4))
-    for kmh in (max(SPEEDS_KMH), min(SPEEDS_KMH)):
+    for kmh in (speeds[-1], speeds[0]):
         for pad, ls in zip(PADS, ("-", "--")):
             r = _pick(rows, round(kmh * KMH, 4), ANGLES[1], pad)
             if r is not None:
@@ -186,20 +187,26 @@ def seed000_table(out_dir: Path) -> list[Path]:
 
 
 def make_figures(out_dir: Path, study: str = "all", workers: int = 2, scheduler: str | None = None,
-                 progress: bool = True, speeds_kmh=SPEEDS_KMH) -> list[Path]:
-    """Run the studies (resumable) and write the figures into ``out_dir``."""
+                 progress: bool = True, speeds_kmh=None) -> list[Path]:
+    """Run the studies (resumable) and write the figures into ``out_dir``.
+
+    ``speeds_kmh`` defaults to :data:`SPEEDS_KMH` (the seed's range).
+    """
+    speeds_kmh = SPEEDS_KMH if speeds_kmh is None else tuple(speeds_kmh)
     from .sweep import run_sweep
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files: list[Path] = []
     if study in ("seed001", "all"):
-        res = run_sweep(SEED001, seed001_variations(speeds_kmh), out_dir / "seed001_runs", workers=workers,
-                        scheduler=scheduler, progress=progress)
-        rows = res.rows
-        files += seed001_figures(rows, lambda r: res.run_dir(r), out_dir)
+        from .sweep import expand_grid
+        res = run_sweep(SEED001, expand_grid(seed001_variations(speeds_kmh)), out_dir / "seed001_runs",
+                        workers=workers, scheduler=scheduler, progress=progress)
+        if res.failed:
+            raise RuntimeError(f"seed 001 study: {res.summary()}")
+        files += seed001_figures(res.rows, lambda r: res.runs_dir / r["run_id"], out_dir)
         table = out_dir / "seed001_table.csv"
-        table.write_bytes((out_dir / "seed001_runs" / "sweep.csv").read_bytes())
+        table.write_bytes(res.table.read_bytes())
         files.append(table)
     if study in ("seed000", "all"):
         files += seed000_table(out_dir)

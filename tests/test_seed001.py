@@ -102,3 +102,21 @@ def test_d_moments_grow_with_impact_angle(runs):
         assert vals[0] < vals[1] < vals[2], (key, vals)
     # and above the quasi-static reference
     assert r[0]["max_sleeper_moment"] > runs(10, 0.006)["max_sleeper_moment"]
+
+
+def test_figures_command_writes_the_seed_figures(tmp_path, monkeypatch, capsys):
+    """`turnout figures` end to end on a reduced grid (2 speeds instead of 6): every figure
+    file is written and the table has one row per run; a second call resumes (no run redone)."""
+    from orchestrator import figures
+    from orchestrator.cli import main
+
+    monkeypatch.setattr(figures, "SPEEDS_KMH", (80, 200))
+    out = tmp_path / "figs"
+    assert main(["figures", "--study", "seed001", "--out", str(out), "--no-progress"]) == 0
+    for name in ("fig3_dQ.png", "fig4_rail.png", "fig5_sleeper.png", "fig6_pressure.png", "fig7_pads.png"):
+        assert (out / name).stat().st_size > 10_000, name
+    rows = (out / "seed001_table.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + 2 * 3 * 2
+    mtimes = {p: p.stat().st_mtime_ns for p in (out / "seed001_runs" / "runs").glob("*/result.json")}
+    assert main(["figures", "--study", "seed001", "--out", str(out), "--no-progress"]) == 0
+    assert all(p.stat().st_mtime_ns == m for p, m in mtimes.items())
