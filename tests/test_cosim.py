@@ -1,6 +1,5 @@
 """Co-simulation physics: vs a monolithic solution, dipped joint (Jenkins P2), ΔQ ∝ V·β."""
 import numpy as np
-import pytest
 import scipy.optimize as so
 import scipy.signal as ss
 

@@ -3,7 +3,6 @@ import numpy as np
 
 from test_elements import ss_timoshenko_frequency
 from track.frf import receptance
-from track.layout import build_layout
 from track.model import build_track
 from track.params import LayoutParams, TrackParams
 from track.statics import static_equilibrium

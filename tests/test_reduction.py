@@ -4,10 +4,8 @@ import scipy.linalg as la
 import scipy.sparse as sp
 
 from track.bodies import beam_body, mesh_line
-from track.layout import build_layout
 from track.model import build_track, clear_rom_cache
-from track.params import (CONCRETE_BEARER, RAIL_60E1, BallastParams, BeamProfile, LayoutParams,
-                          RailPadParams, ReductionParams, TrackParams)
+from track.params import CONCRETE_BEARER, RAIL_60E1, BeamProfile, LayoutParams, ReductionParams, TrackParams
 from track.reduction import craig_bampton, reconstruct
 
 F_CUT = ReductionParams().f_cut          # Hz, the default model cut-off

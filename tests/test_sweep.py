@@ -288,7 +288,7 @@ def test_dask_cluster_gives_the_same_table_as_local_processes(tmp_path, dask_clu
     local = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "local", run_fn=product_run, progress=False)
     dask = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "dask", run_fn=product_run,
                            scheduler=dask_cluster.scheduler_address, progress=False)
-    assert (dask.done, dask.failed) == (6, 0)
+    assert (local.done, dask.done, dask.failed) == (6, 6, 0)
     assert (tmp_path / "dask" / sweep.TABLE_FILE).read_text() == (tmp_path / "local" / sweep.TABLE_FILE).read_text()
 
 

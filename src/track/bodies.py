@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .elements import deflection_shape, end_moments, shear_parameter, timoshenko_matrices
+from .elements import deflection_shape, shear_parameter, timoshenko_matrices
 from .params import BeamProfile
 
 DUPLICATE_TOL = 1e-6  # m: mesh points closer than this are one node
@@ -94,13 +94,7 @@ class BeamBody:
         e = min(max(bisect_right(sl, s) - 1, 0), len(sl) - 2)
         L = sl[e + 1] - sl[e]
         xi = min(max((s - sl[e]) / L, 0.0), 1.0)
-        phi = self._phi_list[e]
-        x2, x3 = xi * xi, xi * xi * xi
-        c = 1.0 / (1.0 + phi)
-        return e, np.array([c * (2 * x3 - 3 * x2 - phi * xi + 1 + phi),
-                            c * L * (x3 - (2 + phi / 2) * x2 + (1 + phi / 2) * xi),
-                            c * (-2 * x3 + 3 * x2 + phi * xi),
-                            c * L * (x3 - (1 - phi / 2) * x2 - (phi / 2) * xi)])
+        return e, deflection_shape(xi, L, self._phi_list[e])
 
     def __post_init__(self):
         self._s_list = self.s.tolist()
@@ -156,4 +150,4 @@ def beam_body(name: str, s: np.ndarray, profile: BeamProfile) -> BeamBody:
     return BeamBody(name=name, s=s, profile=profile, K=K, M=M, Ke=Ke, phi=phi)
 
 
-__all__ = ["BeamBody", "beam_body", "mesh_line", "end_moments"]
+__all__ = ["BeamBody", "beam_body", "mesh_line"]

@@ -78,12 +78,12 @@ def timoshenko_matrices(L: float, E: float, G: float, A: float, I: float, rho: f
     return K, M_t + M_r
 
 
-def deflection_shape(xi: np.ndarray, L: float, phi: float) -> np.ndarray:
+def deflection_shape(xi, L: float, phi: float) -> np.ndarray:
     """Interdependent-interpolation shape functions of the deflection.
 
     Parameters
     ----------
-    xi : ndarray, shape (m,)
+    xi : float or ndarray, shape (m,)
         Local coordinate s/L in [0, 1].
     L : float
         Element length [m].
@@ -92,34 +92,15 @@ def deflection_shape(xi: np.ndarray, L: float, phi: float) -> np.ndarray:
 
     Returns
     -------
-    N : ndarray, shape (m, 4)
-        ``w(xi) = N @ [w1, th1, w2, th2]``.
+    N : ndarray, shape (4,) for a scalar ``xi``, else (m, 4)
+        ``w(xi) = N @ [w1, th1, w2, th2]``. The scalar path avoids numpy's per-call
+        overhead: the time stepper calls it for every wheel at every step.
     """
-    xi = np.atleast_1d(np.asarray(xi, dtype=float))
-    x2, x3 = xi * xi, xi ** 3
-    s = 1.0 / (1.0 + phi)
-    return np.stack([
-        s * (2 * x3 - 3 * x2 - phi * xi + 1 + phi),
-        s * L * (x3 - (2 + phi / 2) * x2 + (1 + phi / 2) * xi),
-        s * (-2 * x3 + 3 * x2 + phi * xi),
-        s * L * (x3 - (1 - phi / 2) * x2 - (phi / 2) * xi),
-    ], axis=1)
-
-
-def end_moments(K: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Internal bending moments at the two element ends [N m] (sagging +).
-
-    Parameters
-    ----------
-    K : ndarray, shape (4, 4)
-        Element stiffness.
-    u : ndarray, shape (..., 4)
-        Element displacement vectors.
-
-    Returns
-    -------
-    ndarray, shape (..., 2)
-        ``[M(s=0), M(s=L)]``; exact for an element without load between its nodes.
-    """
-    f = np.asarray(u) @ K.T
-    return np.stack([-f[..., 1], f[..., 3]], axis=-1)
+    x2 = xi * xi
+    x3 = x2 * xi
+    c = 1.0 / (1.0 + phi)
+    N = (c * (2 * x3 - 3 * x2 - phi * xi + 1 + phi),
+         c * L * (x3 - (2 + phi / 2) * x2 + (1 + phi / 2) * xi),
+         c * (-2 * x3 + 3 * x2 + phi * xi),
+         c * L * (x3 - (1 - phi / 2) * x2 - (phi / 2) * xi))
+    return np.stack(N, axis=-1) if np.ndim(xi) else np.array(N)
