@@ -173,13 +173,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "crossing_1_12_through_120.yaml"
+DEFAULT_SCENARIO = "crossing_1_12_through_120.yaml"  # in the repository's scenarios/ folder
 
 
 def _cmd_build_fmus(args: argparse.Namespace) -> int:
     from .scenario import load_scenario
 
-    path = args.scenario if args.scenario is not None else DEFAULT_SCENARIO
+    from .scenario import bundled_scenario
+
+    path = args.scenario if args.scenario is not None else bundled_scenario(DEFAULT_SCENARIO)
     scenario = load_scenario(path, overrides=args.overrides)
     built = importlib.import_module("orchestrator.build_job").build_fmus(scenario, args.out)
     for name, p in built.items():

@@ -27,9 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-SEED001 = ROOT / "scenarios" / "seed001" / "crossing_1_15_quarter.yaml"
-SEED000 = ROOT / "scenarios" / "crossing_1_12_through_120.yaml"
+SEED001 = "seed001/crossing_1_15_quarter.yaml"   # in the repository's scenarios/ folder
+SEED000 = "crossing_1_12_through_120.yaml"
 SPEEDS_KMH = (10, 40, 80, 120, 160, 200)   # seed 001 Fig. 3 range
 ANGLES = (0.006, 0.012, 0.018)             # rad: nominal, worn, severely worn
 PADS = (1.2e8, 1.2e9)                      # N/m: indirect (soft) and direct (stiff) fixing
@@ -162,7 +161,9 @@ def seed000_table(out_dir: Path) -> list[Path]:
     from .scenario import load_scenario
     from track.model import build_track, clear_rom_cache
 
-    sc = load_scenario(SEED000)
+    from .scenario import bundled_scenario
+
+    sc = load_scenario(bundled_scenario(SEED000))
     clear_rom_cache()
     t0 = time.process_time()
     model = build_track(sc.track)
@@ -199,9 +200,10 @@ def make_figures(out_dir: Path, study: str = "all", workers: int = 2, scheduler:
     out_dir.mkdir(parents=True, exist_ok=True)
     files: list[Path] = []
     if study in ("seed001", "all"):
+        from .scenario import bundled_scenario
         from .sweep import expand_grid
-        res = run_sweep(SEED001, expand_grid(seed001_variations(speeds_kmh)), out_dir / "seed001_runs",
-                        workers=workers, scheduler=scheduler, progress=progress)
+        res = run_sweep(bundled_scenario(SEED001), expand_grid(seed001_variations(speeds_kmh)),
+                        out_dir / "seed001_runs", workers=workers, scheduler=scheduler, progress=progress)
         if res.failed:
             raise RuntimeError(f"seed 001 study: {res.summary()}")
         files += seed001_figures(res.rows, lambda r: res.runs_dir / r["run_id"], out_dir)

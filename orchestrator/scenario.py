@@ -41,7 +41,7 @@ from track.params import (
     VoidSpec,
 )
 
-from .errors import ScenarioError
+from .errors import ScenarioError, UserInputError
 
 __all__ = [
     "PortMap",
@@ -906,6 +906,26 @@ def _apply_override(data: dict, text: str) -> None:
 # --------------------------------------------------------------------------------------
 # Public entry points
 # --------------------------------------------------------------------------------------
+def bundled_scenario(relative: str) -> Path:
+    """Path of a scenario shipped in the repository's ``scenarios/`` folder.
+
+    Looked up next to the source tree (an editable install or a checkout) and then in
+    the current folder's ``scenarios/`` (a regular install run from the repository).
+
+    Raises
+    ------
+    UserInputError
+        If neither exists.
+    """
+    candidates = [Path(__file__).resolve().parents[1] / "scenarios" / relative,
+                  Path.cwd() / "scenarios" / relative]
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise UserInputError(f"scenarios/{relative}: not found next to the package nor in the current folder; "
+                         "run the command from the repository folder")
+
+
 def load_scenario(path: str | os.PathLike, overrides: Iterable[str] = ()) -> Scenario:
     """Load and validate a scenario YAML file.
 

@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from orchestrator.figures import SEED001
+
+from conftest import REPO_ROOT, SCENARIOS_DIR
 from orchestrator.scenario import load_scenario
 from orchestrator.study import run_case
 
@@ -25,8 +27,9 @@ def runs(tmp_path_factory):
     def get(kmh, angle, pad=SOFT):
         key = (kmh, angle, pad)
         if key not in cache:
-            sc = load_scenario(SEED001, [f"vehicle.speed={kmh * KMH}", f"track.crossing.impact_angle={angle}",
-                                         f"track.rail_pad.stiffness={pad}"])
+            sc = load_scenario(SCENARIOS_DIR / SEED001, [
+                f"vehicle.speed={kmh * KMH}", f"track.crossing.impact_angle={angle}",
+                f"track.rail_pad.stiffness={pad}"])
             cache[key] = run_case(sc, base / f"{kmh}_{angle}_{pad:.0e}")
         return cache[key]
     return get
@@ -111,6 +114,7 @@ def test_figures_command_writes_the_seed_figures(tmp_path, monkeypatch, capsys):
     from orchestrator.cli import main
 
     monkeypatch.setattr(figures, "SPEEDS_KMH", (80, 200))
+    monkeypatch.chdir(REPO_ROOT)  # an installed package finds the bundled scenarios from here
     out = tmp_path / "figs"
     assert main(["figures", "--study", "seed001", "--out", str(out), "--no-progress"]) == 0
     for name in ("fig3_dQ.png", "fig4_rail.png", "fig5_sleeper.png", "fig6_pressure.png", "fig7_pads.png"):
