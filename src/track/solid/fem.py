@@ -1,0 +1,287 @@
+"""Linear elasticity of the solid with quadratic tetrahedra (scikit-fem), and node sets.
+
+Dofs: 3 per node, ``[u_x, u_y, u_z]`` of node ``i`` at ``3 i .. 3 i + 2`` (node
+``i`` = row ``i`` of ``points``). Frame as in :mod:`track.solid.section`: ``x``
+along the rail, ``y`` lateral, ``z`` upward.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .mesh import TET_EDGES
+
+# Local nodes of the four faces of a 10-node tetrahedron (corners, then the mid-edge
+# nodes of the face's edges (a,b), (b,c), (a,c)), with TET_EDGES numbering.
+_FACES = np.array([[0, 1, 2, 4, 5, 6],
+                   [0, 1, 3, 4, 8, 7],
+                   [0, 2, 3, 6, 9, 7],
+                   [1, 2, 3, 5, 9, 8]])
+COORD_TOL = 1e-9  # m: a node within this distance of a plane or line is on it
+
+
+def lame(E: float, nu: float) -> tuple[float, float]:
+    """Lame parameters ``(lambda, mu)`` [Pa] from Young's modulus [Pa] and Poisson's ratio [-]."""
+    from skfem.models.elasticity import lame_parameters
+    return lame_parameters(E, nu)
+
+
+def assemble(points: np.ndarray, tets: np.ndarray, E: float, nu: float,
+             rho: float) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """Stiffness and consistent mass of an isotropic linear-elastic solid.
+
+    Quadratic Lagrange tetrahedra (``ElementVector(ElementTetP2)``) on straight-sided
+    elements (affine mapping); the quadrature is exact: degree 2 for ``K``
+    (products of linear strains), degree 4 for ``M``.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Node coordinates [m].
+    tets : ndarray of int, shape (m, 10)
+        Elements in the node order of :mod:`track.solid.mesh`.
+    E : float
+        Young's modulus [Pa].
+    nu : float
+        Poisson's ratio [-].
+    rho : float
+        Density [kg/m^3].
+
+    Returns
+    -------
+    K, M : scipy.sparse.csr_matrix, shape (3n, 3n)
+        [N/m] and [kg], dof ``3 i + c`` = component ``c`` of node ``i``.
+    """
+    import skfem
+    from skfem.helpers import dot
+    from skfem.models.elasticity import linear_elasticity
+
+    points = np.asarray(points, dtype=float)
+    tets = np.asarray(tets)
+    corners = np.unique(tets[:, :4])
+    renum = np.full(points.shape[0], -1, dtype=np.int64)
+    renum[corners] = np.arange(corners.size)
+    mesh = skfem.MeshTet1(points[corners].T.copy(), renum[tets[:, :4]].T.astype(np.int32).copy())
+    if not np.array_equal(mesh.t, renum[tets[:, :4]].T):
+        raise RuntimeError("scikit-fem reordered the tetrahedra corners")
+    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()), intorder=2)
+
+    # scikit-fem dof -> our node: corner nodes are the mesh vertices, edge dofs are matched
+    # through the element-to-edge table (local edge k of element e is TET_EDGES[k]).
+    node_of_edge = np.empty(mesh.edges.shape[1], dtype=np.int64)
+    node_of_edge[mesh.t2e.ravel()] = tets[:, 4:].T.ravel()
+    n = points.shape[0]
+    perm = np.empty(basis.N, dtype=np.int64)                       # skfem dof -> our dof
+    comp = np.arange(3)[:, None]
+    perm[basis.nodal_dofs] = 3 * corners[None, :] + comp
+    perm[basis.edge_dofs] = 3 * node_of_edge[None, :] + comp
+    if basis.N != 3 * n or np.unique(perm).size != 3 * n:
+        raise ValueError("tets do not use every node exactly once as a corner or mid-edge node")
+
+    lam, mu = lame(E, nu)
+    K = skfem.asm(linear_elasticity(lam, mu), basis)
+
+    @skfem.BilinearForm
+    def mass(u, v, w):
+        return rho * dot(u, v)
+
+    M = skfem.asm(mass, skfem.Basis(mesh, basis.elem, intorder=4))   # same dof numbering
+    P = sp.csr_matrix((np.ones(3 * n), (perm, np.arange(3 * n))), shape=(3 * n, 3 * n))
+    return (P @ K @ P.T).tocsr(), (P @ M @ P.T).tocsr()
+
+
+def nodes_on_plane(points: np.ndarray, axis: int, value: float, tol: float = COORD_TOL) -> np.ndarray:
+    """Indices of nodes with ``points[:, axis] == value`` (within ``tol`` [m]), shape (k,)."""
+    return np.flatnonzero(np.abs(np.asarray(points)[:, axis] - value) <= tol)
+
+
+def nodes_on_line(points: np.ndarray, y: float, z: float, tol: float = COORD_TOL) -> np.ndarray:
+    """Nodes on the longitudinal line ``(y, z)`` [m], sorted by ``x``, shape (k,).
+
+    The contact path on the running surface is such a line when the section has a
+    corner at ``(y_c, top)`` (:meth:`track.solid.section.RailSection.with_points`).
+    """
+    P = np.asarray(points)
+    idx = np.flatnonzero((np.abs(P[:, 1] - y) <= tol) & (np.abs(P[:, 2] - z) <= tol))
+    return idx[np.argsort(P[idx, 0])]
+
+
+def nearest_node(points: np.ndarray, xyz, tol: float | None = None) -> int:
+    """Index of the node nearest to ``xyz`` [m]; with ``tol`` [m], raise if farther."""
+    d = np.linalg.norm(np.asarray(points) - np.asarray(xyz, dtype=float), axis=1)
+    i = int(np.argmin(d))
+    if tol is not None and d[i] > tol:
+        raise ValueError(f"no node within {tol} m of {tuple(xyz)} (nearest {d[i]:.3g} m)")
+    return i
+
+
+def seat_nodes(points: np.ndarray, x_seat: float, half_length: float, y: float, z: float = 0.0,
+               tol: float = COORD_TOL) -> np.ndarray:
+    """Nodes of a bushing patch: on the line ``(y, z)`` with ``|x - x_seat| <= half_length``.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    x_seat : float
+        Seat centre along the rail [m].
+    half_length : float
+        Half the patch length along the rail [m]; 0 for the single node at the seat
+        centre (a station of the mesh).
+    y, z : float
+        Line of the bushing on the foot bottom [m] (a corner of the section).
+
+    Returns
+    -------
+    ndarray of int, shape (k,)
+        Sorted by ``x``.
+    """
+    line = nodes_on_line(points, y, z, tol)
+    return line[np.abs(np.asarray(points)[line, 0] - x_seat) <= half_length + tol]
+
+
+def faces_on_plane(points: np.ndarray, tets: np.ndarray, axis: int, value: float,
+                   tol: float = COORD_TOL) -> np.ndarray:
+    """The 6-node triangles of the mesh that lie in a plane ``points[:, axis] == value``.
+
+    Works for boundary faces (end surfaces) and interior ones (the cross-section at
+    a station); each face is returned once.
+
+    Returns
+    -------
+    ndarray of int, shape (f, 6)
+        Corners then mid-edge nodes (edges (0,1), (1,2), (0,2)).
+    """
+    tets = np.asarray(tets)
+    on = np.abs(np.asarray(points)[:, axis] - value) <= tol
+    faces = tets[:, _FACES].reshape(-1, 6)
+    faces = faces[on[faces].all(axis=1)]
+    _, first = np.unique(np.sort(faces[:, :3], axis=1), axis=0, return_index=True)
+    return faces[np.sort(first)]
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceMoments:
+    """Consistent area integrals of the quadratic shape functions over a flat surface.
+
+    With ``u_h(X) = sum_i N_i(X) u_i`` the finite-element field on the surface and
+    ``r = X - centroid``, ``int u_h dA = sum_i m0_i u_i`` and
+    ``int r (x) u_h dA = sum_i m1_i (x) u_i`` exactly. (The corner values ``m0``
+    of quadratic triangles are 0: a uniform traction loads only the mid-edge
+    nodes.) Moments are taken about the centroid to avoid cancellation.
+
+    Attributes
+    ----------
+    nodes : ndarray of int, shape (s,)
+        Sorted node indices of the surface.
+    m0 : ndarray, shape (s,)
+        ``int N_i dA`` [m^2].
+    m1 : ndarray, shape (s, 3)
+        ``int N_i r dA`` [m^3].
+    area : float
+        [m^2].
+    centroid : ndarray, shape (3,)
+        ``int X dA / A`` [m].
+    S : ndarray, shape (3, 3)
+        ``int r r^T dA`` [m^4].
+    """
+
+    nodes: np.ndarray
+    m0: np.ndarray
+    m1: np.ndarray
+    area: float
+    centroid: np.ndarray
+    S: np.ndarray
+
+    @classmethod
+    def from_nodal_weights(cls, points: np.ndarray, nodes: np.ndarray,
+                           weights: np.ndarray) -> "SurfaceMoments":
+        """Lumped moments of point weights ``w_i`` at the nodes (Abaqus-style weighting).
+
+        Parameters
+        ----------
+        points : ndarray, shape (n, 3)
+            [m].
+        nodes : ndarray of int, shape (s,)
+        weights : ndarray, shape (s,)
+            Non-negative [m^2].
+        """
+        nodes = np.asarray(nodes)
+        w = np.asarray(weights, dtype=float)
+        X = np.asarray(points, dtype=float)[nodes]
+        c = w @ X / w.sum()
+        r = X - c
+        return cls(nodes=nodes, m0=w, m1=w[:, None] * r, area=float(w.sum()), centroid=c,
+                   S=np.einsum("i,ia,ib->ab", w, r, r))
+
+
+def surface_moments(points: np.ndarray, faces: np.ndarray) -> SurfaceMoments:
+    """Integrate the quadratic shape functions of a set of flat 6-node triangles.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        [m].
+    faces : ndarray of int, shape (f, 6)
+        Corners then mid-edge nodes of edges (0,1), (1,2), (0,2)
+        (:func:`faces_on_plane`).
+
+    Returns
+    -------
+    SurfaceMoments
+    """
+    from skfem.quadrature import get_quadrature
+    from skfem.refdom import RefTri
+
+    faces = np.asarray(faces)
+    X = np.asarray(points, dtype=float)[faces]                        # (f, 6, 3)
+    xi, W = get_quadrature(RefTri, 4)      # exact for N_i * linear (3) and r r^T (2)
+    l1, l2 = xi
+    l0 = 1.0 - l1 - l2
+    N = np.array([l0 * (2 * l0 - 1), l1 * (2 * l1 - 1), l2 * (2 * l2 - 1),
+                  4 * l0 * l1, 4 * l1 * l2, 4 * l0 * l2])            # (6, q)
+    two_area = np.linalg.norm(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), axis=1)   # (f,)
+    dA = two_area[:, None] * W[None, :]                                # (f, q)
+    Xq = np.einsum("kq,fkd->fqd", N, X)                                # quadrature points (f, q, 3)
+    area = float(dA.sum())
+    c = np.einsum("fq,fqd->d", dA, Xq) / area
+    rq = Xq - c
+    nodes, inv = np.unique(faces, return_inverse=True)
+    inv = inv.reshape(faces.shape).ravel()
+    m0_fk = np.einsum("fq,kq->fk", dA, N)
+    m1_fk = np.einsum("fq,kq,fqd->fkd", dA, N, rq)
+    m0 = np.bincount(inv, weights=m0_fk.ravel(), minlength=nodes.size)
+    m1 = np.stack([np.bincount(inv, weights=m1_fk[..., d].ravel(), minlength=nodes.size)
+                   for d in range(3)], axis=1)
+    S = np.einsum("fq,fqa,fqb->ab", dA, rq, rq)
+    return SurfaceMoments(nodes=nodes, m0=m0, m1=m1, area=area, centroid=c, S=S)
+
+
+def body_force(M: sp.spmatrix, g) -> np.ndarray:
+    """Consistent nodal loads of a uniform acceleration field ``g`` [m/s^2] (e.g. gravity).
+
+    Parameters
+    ----------
+    M : sparse, shape (3n, 3n)
+        Consistent mass [kg].
+    g : array_like, shape (3,)
+        Body acceleration ``(g_x, g_y, g_z)`` [m/s^2]; gravity is ``(0, 0, -9.81)``.
+
+    Returns
+    -------
+    ndarray, shape (3n,)
+        Nodal forces [N].
+    """
+    n = M.shape[0] // 3
+    return M @ np.tile(np.asarray(g, dtype=float), n)
+
+
+def strain_energy(K: sp.spmatrix, u: np.ndarray) -> float:
+    """``u^T K u / 2`` [J] for displacements ``u`` [m], shape (3n,)."""
+    return 0.5 * float(u @ (K @ u))
+
+
+__all__ = ["assemble", "lame", "nodes_on_plane", "nodes_on_line", "nearest_node", "seat_nodes",
+           "faces_on_plane", "SurfaceMoments",
+           "surface_moments", "body_force", "strain_energy", "TET_EDGES"]
