@@ -28,6 +28,39 @@ def lame(E: float, nu: float) -> tuple[float, float]:
     return lame_parameters(E, nu)
 
 
+def _basis(points: np.ndarray, tets: np.ndarray, intorder: int):
+    """scikit-fem vector P2 basis on the corner mesh and the permutation to our dofs.
+
+    Returns ``(basis, P)``: ``P`` (3n, 3n) sparse with ``A_ours = P A_skfem P^T`` and
+    ``b_ours = P b_skfem``.
+    """
+    import skfem
+
+    points = np.asarray(points, dtype=float)
+    tets = np.asarray(tets)
+    corners = np.unique(tets[:, :4])
+    renum = np.full(points.shape[0], -1, dtype=np.int64)
+    renum[corners] = np.arange(corners.size)
+    mesh = skfem.MeshTet1(points[corners].T.copy(), renum[tets[:, :4]].T.astype(np.int32).copy())
+    if not np.array_equal(mesh.t, renum[tets[:, :4]].T):
+        raise RuntimeError("scikit-fem reordered the tetrahedra corners")
+    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()), intorder=intorder)
+
+    # scikit-fem dof -> our node: corner nodes are the mesh vertices, edge dofs are matched
+    # through the element-to-edge table (local edge k of element e is TET_EDGES[k]).
+    node_of_edge = np.empty(mesh.edges.shape[1], dtype=np.int64)
+    node_of_edge[mesh.t2e.ravel()] = tets[:, 4:].T.ravel()
+    n = points.shape[0]
+    perm = np.empty(basis.N, dtype=np.int64)                       # skfem dof -> our dof
+    comp = np.arange(3)[:, None]
+    perm[basis.nodal_dofs] = 3 * corners[None, :] + comp
+    perm[basis.edge_dofs] = 3 * node_of_edge[None, :] + comp
+    if basis.N != 3 * n or np.unique(perm).size != 3 * n:
+        raise ValueError("tets do not use every node exactly once as a corner or mid-edge node")
+    P = sp.csr_matrix((np.ones(3 * n), (perm, np.arange(3 * n))), shape=(3 * n, 3 * n))
+    return basis, P
+
+
 def assemble(points: np.ndarray, tets: np.ndarray, E: float, nu: float,
              rho: float) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """Stiffness and consistent mass of an isotropic linear-elastic solid.
@@ -58,28 +91,7 @@ def assemble(points: np.ndarray, tets: np.ndarray, E: float, nu: float,
     from skfem.helpers import dot
     from skfem.models.elasticity import linear_elasticity
 
-    points = np.asarray(points, dtype=float)
-    tets = np.asarray(tets)
-    corners = np.unique(tets[:, :4])
-    renum = np.full(points.shape[0], -1, dtype=np.int64)
-    renum[corners] = np.arange(corners.size)
-    mesh = skfem.MeshTet1(points[corners].T.copy(), renum[tets[:, :4]].T.astype(np.int32).copy())
-    if not np.array_equal(mesh.t, renum[tets[:, :4]].T):
-        raise RuntimeError("scikit-fem reordered the tetrahedra corners")
-    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()), intorder=2)
-
-    # scikit-fem dof -> our node: corner nodes are the mesh vertices, edge dofs are matched
-    # through the element-to-edge table (local edge k of element e is TET_EDGES[k]).
-    node_of_edge = np.empty(mesh.edges.shape[1], dtype=np.int64)
-    node_of_edge[mesh.t2e.ravel()] = tets[:, 4:].T.ravel()
-    n = points.shape[0]
-    perm = np.empty(basis.N, dtype=np.int64)                       # skfem dof -> our dof
-    comp = np.arange(3)[:, None]
-    perm[basis.nodal_dofs] = 3 * corners[None, :] + comp
-    perm[basis.edge_dofs] = 3 * node_of_edge[None, :] + comp
-    if basis.N != 3 * n or np.unique(perm).size != 3 * n:
-        raise ValueError("tets do not use every node exactly once as a corner or mid-edge node")
-
+    basis, P = _basis(points, tets, intorder=2)
     lam, mu = lame(E, nu)
     K = skfem.asm(linear_elasticity(lam, mu), basis)
 
@@ -87,9 +99,47 @@ def assemble(points: np.ndarray, tets: np.ndarray, E: float, nu: float,
     def mass(u, v, w):
         return rho * dot(u, v)
 
-    M = skfem.asm(mass, skfem.Basis(mesh, basis.elem, intorder=4))   # same dof numbering
-    P = sp.csr_matrix((np.ones(3 * n), (perm, np.arange(3 * n))), shape=(3 * n, 3 * n))
+    M = skfem.asm(mass, skfem.Basis(basis.mesh, basis.elem, intorder=4))   # same dof numbering
     return (P @ K @ P.T).tocsr(), (P @ M @ P.T).tocsr()
+
+
+def assemble_load(points: np.ndarray, tets: np.ndarray, f, intorder: int = 6) -> np.ndarray:
+    """Consistent nodal loads of a body-force field.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        [m].
+    tets : ndarray of int, shape (m, 10)
+    f : callable
+        ``f(X)`` with ``X`` of shape (3, ...) [m] returns the force per volume,
+        shape (3, ...) [N/m^3].
+    intorder : int
+        Degree of the quadrature.
+
+    Returns
+    -------
+    ndarray, shape (3n,)
+        [N].
+    """
+    import skfem
+    from skfem.helpers import dot
+
+    basis, P = _basis(points, tets, intorder=intorder)
+
+    @skfem.LinearForm
+    def load(v, w):
+        return dot(f(w.x), v)
+
+    return P @ skfem.asm(load, basis)
+
+
+def boundary_nodes(tets: np.ndarray) -> np.ndarray:
+    """Nodes on the boundary of the mesh (of the faces that belong to one element), sorted."""
+    faces = np.asarray(tets)[:, _FACES].reshape(-1, 6)
+    _, inv, count = np.unique(np.sort(faces[:, :3], axis=1), axis=0, return_inverse=True,
+                              return_counts=True)
+    return np.unique(faces[count[inv.ravel()] == 1])
 
 
 def nodes_on_plane(points: np.ndarray, axis: int, value: float, tol: float = COORD_TOL) -> np.ndarray:
@@ -282,6 +332,6 @@ def strain_energy(K: sp.spmatrix, u: np.ndarray) -> float:
     return 0.5 * float(u @ (K @ u))
 
 
-__all__ = ["assemble", "lame", "nodes_on_plane", "nodes_on_line", "nearest_node", "seat_nodes",
+__all__ = ["assemble", "assemble_load", "boundary_nodes", "lame", "nodes_on_plane", "nodes_on_line", "nearest_node", "seat_nodes",
            "faces_on_plane", "SurfaceMoments",
            "surface_moments", "body_force", "strain_energy", "TET_EDGES"]
