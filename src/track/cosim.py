@@ -44,12 +44,13 @@ class Record:
     t: list = field(default_factory=list)
     q: list = field(default_factory=list)
     v: list = field(default_factory=list)
+    a: list = field(default_factory=list)
     x: list = field(default_factory=list)
     Fz: list = field(default_factory=list)
     parts: list = field(default_factory=list)
 
     def arrays(self) -> dict:
-        return {k: np.array(getattr(self, k)) for k in ("t", "q", "v", "x", "Fz", "parts")}
+        return {k: np.array(getattr(self, k)) for k in ("t", "q", "v", "a", "x", "Fz", "parts")}
 
 
 def wheel_sides(n_wheels: int) -> list[str]:
@@ -207,6 +208,7 @@ class TrackCosim:
         r.t.append(self.integ.t)
         r.q.append(self.integ.q.copy())
         r.v.append(self.integ.v.copy())
+        r.a.append(self.integ.a.copy())
         r.x.append(np.array(x, float))
         r.Fz.append(self.Fz.copy())
         r.parts.append(self.parts.copy())
@@ -231,5 +233,5 @@ class TrackCosim:
         self.Fz, self.parts, self.rail_w = s["Fz"].copy(), s["parts"].copy(), s["rail_w"].copy()
         self.Fz_coupling, self._Fz_last = s["Fz_coupling"].copy(), s["Fz_last"].copy()
         n = s["record_len"]
-        for k in ("t", "q", "v", "x", "Fz", "parts"):
+        for k in ("t", "q", "v", "a", "x", "Fz", "parts"):
             del getattr(self.record, k)[n:]

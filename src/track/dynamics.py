@@ -55,6 +55,46 @@ REL_FORCE_TOL = 1e-6    # relative to the largest applied force. A force error f
                         # and it is not carried over (the next step re-evaluates the forces)
 
 
+# ------------------------------------------------------------------------------------------
+# Factorizations shared by integrators of the same matrix (a calibration or a diagnosis runs
+# hundreds of variants of one track that differ only in void gaps or loads: the matrix
+# M + (1+a)(g h C + b h^2 K), its LU and the influence rows are then the same)
+# ------------------------------------------------------------------------------------------
+FACTOR_CACHE_SIZE = 4   # matrices kept per process (each: LU + ballast rows, ~10-30 MB)
+
+
+@dataclass(eq=False)
+class _SharedFactor:
+    lu: object
+    influence: dict = field(default_factory=dict)
+    Zb: np.ndarray | None = None
+    Zb_dofs: np.ndarray | None = None
+    new: bool = True
+
+
+_FACTORS: dict = {}
+
+
+def _shared_factor(A: sp.csc_matrix) -> _SharedFactor:
+    """The LU of ``A`` (SuperLU, MMD_ATA ordering), from the cache when the same matrix was seen."""
+    import hashlib
+
+    A.sort_indices()
+    h = hashlib.blake2b(digest_size=20)
+    for arr in (np.array(A.shape), A.indptr, A.indices, A.data):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    key = h.hexdigest()
+    hit = _FACTORS.pop(key, None)
+    if hit is not None:
+        hit.new = False
+        _FACTORS[key] = hit           # most recently used last
+        return hit
+    while len(_FACTORS) >= FACTOR_CACHE_SIZE:
+        _FACTORS.pop(next(iter(_FACTORS)))
+    out = _FACTORS[key] = _SharedFactor(spla.splu(A, permc_spec="MMD_ATA", options={"SymmetricMode": True}))
+    return out
+
+
 @dataclass
 class PointLoad:
     """A vertical force at a material point of the track.
@@ -128,16 +168,18 @@ class TrackIntegrator:
         self._Ct = (model.C + Cb).tocsr()
         b, g, a = self.beta, self.gamma, self.alpha
         A = model.M + (1 + a) * (g * h * self._Ct + b * h * h * self._Kt)
-        self._lu = spla.splu(A.tocsc(), permc_spec="MMD_ATA", options={"SymmetricMode": True})
-        self.counters.factorizations += 1
+        shared = _shared_factor(A.tocsc())
+        self._lu = shared.lu
+        if shared.new:
+            self.counters.factorizations += 1
         self.t0 = 0.0
         self.k = 0  # steps taken: t = t0 + k h (no accumulated round-off)
         self.q = np.array(q0, dtype=float)
         self.v = np.zeros(n) if v0 is None else np.array(v0, dtype=float)
         self.F = self._forces(self.q, self.v, loads0)
         self.Fc = np.array([-ld.force for ld in loads0 if not callable(ld.force)], dtype=float)
-        self._influence_cache: dict = {}
-        self._Zb = None
+        self._influence_cache = shared.influence   # shared by integrators with the same matrix
+        self._shared = shared
         self._rhs_const = (1.0 + self.alpha) * model.f_gravity
         # initial acceleration from the equation of motion
         r = self.F - self._Ct @ self.v - self._Kt @ self.q
@@ -220,27 +262,30 @@ class TrackIntegrator:
         """``A^{-1} r`` of a rail point (shape (n,)): the step response to a force there.
 
         Built from per-element columns ``A^{-1} T[dof, :]`` computed once per element
-        (4 solves when a wheel enters an element).
+        (4 solves when a wheel enters a beam element, 2 for a segment of the solid's
+        contact path, :meth:`track.model.Body.load_rows`).
         """
         key = (point.body, point.element)
         Ze = self._influence_cache.get(key)
         if Ze is None:
             b = self.model.body(point.body)
-            dofs = np.arange(2 * point.element, 2 * point.element + 4)
-            E = np.zeros((self.model.n, 4))
-            E[b.gdofs, :] = b.rom.T[dofs, :].T
+            rows = b.load_rows(point.element)        # (4, nr) beam element, (2, nr) solid path segment
+            E = np.zeros((self.model.n, rows.shape[0]))
+            E[b.gdofs, :] = rows.T
             Ze = self._influence_cache[key] = self._lu.solve(E)
-            self.counters.solves += 4
+            self.counters.solves += rows.shape[0]
         return Ze @ point.shape
 
     def _ballast_influence(self) -> np.ndarray:
         """``A^{-1} e_d`` for every ballast dof d, as rows (shape (nb, n)), computed once."""
-        if self._Zb is None:
+        sh = self._shared
+        if sh.Zb is None or sh.Zb_dofs is None or not np.array_equal(sh.Zb_dofs, self._D):
             E = np.zeros((self.model.n, self._D.size))
             E[self._D, np.arange(self._D.size)] = 1.0
-            self._Zb = np.ascontiguousarray(self._lu.solve(E).T)
+            sh.Zb = np.ascontiguousarray(self._lu.solve(E).T)
+            sh.Zb_dofs = self._D.copy()
             self.counters.solves += self._D.size
-        return self._Zb
+        return sh.Zb
 
     def step_contacts(self, points: Sequence[PointMap], z_wheel: np.ndarray, surfaces: Sequence[tuple],
                       c_h: float = HERTZ_CONSTANT) -> np.ndarray:

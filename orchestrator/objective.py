@@ -1,0 +1,186 @@
+"""Simulated sensors against measured ones: residuals, the objective, the noise level.
+
+Objective (DESIGN.md §4.3, §5) — a weighted sum over sensor groups of the normalised RMSE::
+
+    nRMSE_i = sqrt( mean_t (s_i(t) - m_i(t))^2 ) / std_t(m_i)        (channel i, valid samples)
+    J       = sum_g w_g * mean_{i in g} nRMSE_i  /  sum_g w_g
+
+``s`` is the simulation put on the measured time base (after the time alignment),
+``m`` the measurement; ``w_g`` the layout's group weights (default 1 each, so a group
+with six channels counts as much as one with two). Normalising by the channel's
+standard deviation makes pressures [Pa], strains [-] and displacements [m] comparable;
+J = 1 means "no better than the channel's mean".
+
+Noise level of a measured channel, without any knowledge of the signal: the robust
+spread of the first differences, sigma = 1.4826 MAD(diff m) / sqrt(2) — exact for white
+noise on a signal that is smooth at the sampling interval (the passage signals are,
+at 5 kHz: pressure, strain and displacement change over milliseconds), and robust to
+the few large differences of an impact. It feeds the chi-square ``sum (r/sigma)^2``
+of the information criterion used by the diagnosis (:mod:`orchestrator.diagnose`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from track.sensors import displacement_from_acceleration
+
+MAD_TO_SIGMA = 1.4826   # sigma / MAD of a normal distribution
+NOISE_FLOOR = 1e-12     # relative to the channel's std: keeps chi-square finite for noise-free data
+
+
+@dataclass
+class Comparison:
+    """Residuals of one simulation against one measurement (see module docstring).
+
+    Attributes
+    ----------
+    shift : float
+        Time alignment [s] used: measured time t matches simulated time t - shift.
+    channels : dict
+        id -> {"rmse", "nrmse", "n", "t_peak", "window"}: RMSE in SI units, nRMSE [-],
+        number of valid samples, time of the largest residual and the time window
+        holding 80 % of the residual energy [s].
+    groups : dict
+        group -> mean nRMSE of its channels.
+    objective : float
+        J [-].
+    chi2 : float
+        sum over channels and samples of (residual / sigma)^2.
+    n : int
+        Valid samples over all channels.
+    residuals : dict
+        id -> residual s - m on the measured time base (NaN where masked).
+    simulated : dict
+        id -> the simulation on the measured time base.
+    """
+
+    shift: float
+    channels: dict
+    groups: dict
+    objective: float
+    chi2: float
+    n: int
+    residuals: dict = field(repr=False, default_factory=dict)
+    simulated: dict = field(repr=False, default_factory=dict)
+
+    def summary(self) -> dict:
+        """JSON-able: objective and per-channel rmse / nrmse (DESIGN.md §4.5 ``baseline``)."""
+        return {"objective": self.objective, "shift": self.shift, "chi2": self.chi2, "n": self.n,
+                "groups": dict(self.groups),
+                "channels": {k: {"rmse": v["rmse"], "nrmse": v["nrmse"]} for k, v in self.channels.items()}}
+
+
+def noise_sigma(x: np.ndarray) -> float:
+    """Noise standard deviation of a uniformly sampled channel (module docstring), NaNs skipped."""
+    d = np.diff(np.asarray(x, float))
+    d = d[np.isfinite(d)]
+    if d.size < 3:
+        return float("nan")
+    return float(MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+
+
+def objective_from_channels(nrmse: dict, groups: dict, weights: dict) -> tuple[float, dict]:
+    """J and the per-group mean nRMSE from channel nRMSEs (module docstring)."""
+    by_group: dict[str, list[float]] = {}
+    for sid, value in nrmse.items():
+        by_group.setdefault(groups[sid], []).append(value)
+    gmean = {g: float(np.mean(v)) for g, v in by_group.items()}
+    wsum = sum(weights.get(g, 1.0) for g in gmean)
+    J = sum(weights.get(g, 1.0) * v for g, v in gmean.items()) / wsum if wsum > 0 else float("nan")
+    return float(J), gmean
+
+
+def _energy_window(t: np.ndarray, r: np.ndarray, share: float = 0.8) -> list[float]:
+    e = np.where(np.isfinite(r), r * r, 0.0)
+    c = np.cumsum(e)
+    if c[-1] <= 0:
+        return [float(t[0]), float(t[-1])]
+    lo = (1 - share) / 2 * c[-1]
+    hi = (1 + share) / 2 * c[-1]
+    return [float(t[np.searchsorted(c, lo)]), float(t[min(np.searchsorted(c, hi), t.size - 1)])]
+
+
+def on_measured_base(measured, t_sim: np.ndarray, sim: dict, shift: float, types: dict | None = None,
+                     highpass: float | None = None) -> dict:
+    """The simulation on the measured time base, ``s(t) = sim(t - shift)`` (cubic; NaN outside).
+
+    Displacement channels (``types[id] == "displacement"``, given as their
+    accelerometer's signal) are reconstructed here, on the measured window, by the
+    very integration and filter the measured reconstruction used.
+    """
+    from scipy.interpolate import CubicSpline
+
+    t_new = measured.t - shift
+    inside = (t_new >= t_sim[0]) & (t_new <= t_sim[-1])
+    out = {}
+    for k, y in sim.items():
+        s = np.full(t_new.shape, np.nan)
+        s[inside] = CubicSpline(t_sim, y)(t_new[inside])
+        if types is not None and highpass is not None and types.get(k) == "displacement" and inside.any():
+            idx = np.flatnonzero(inside)
+            filled = np.interp(np.arange(s.size), idx, s[idx])   # edges held: the integration needs a full window
+            s = np.where(inside, displacement_from_acceleration(filled, measured.dt, highpass), np.nan)
+        out[k] = s
+    return out
+
+
+def compare(measured, t_sim: np.ndarray, sim: dict, groups: dict, weights: dict, sigma: dict,
+            shift: float | None = None, max_shift: float | None = None, types: dict | None = None,
+            highpass: float | None = None) -> Comparison:
+    """Residuals, nRMSE per channel, J and chi-square of a simulation against a measurement.
+
+    Parameters
+    ----------
+    measured : orchestrator.measured.MeasuredData
+    t_sim : ndarray, shape (nt,)
+        Simulated times [s].
+    sim : dict
+        Sensor id -> simulated signal, shape (nt,); channels missing from ``measured`` are ignored.
+    groups, weights : dict
+        Sensor id -> group; group -> weight.
+    sigma : dict
+        Sensor id -> noise standard deviation of the measured channel (:func:`noise_sigma`).
+    shift : float, optional
+        Time alignment [s]; ``None``: estimated by cross-correlation
+        (:func:`orchestrator.measured.align`), within ``max_shift`` of 0.
+    types : dict, optional
+        Sensor id -> type; with ``highpass`` [Hz], displacement channels of ``sim`` are
+        accelerations, reconstructed on the measured base (:func:`on_measured_base`).
+        Without, ``sim`` is compared as it is.
+    """
+    from .measured import align
+
+    ids = [k for k in measured.channels if k in sim]
+    if not ids:
+        raise ValueError("no measured channel has a simulated counterpart")
+    if shift is None:
+        shift = align(measured, t_sim, {k: sim[k] for k in ids}, max_shift=max_shift)
+    on = on_measured_base(measured, t_sim, {k: sim[k] for k in ids}, shift, types, highpass)
+    channels, nrmse, residuals = {}, {}, {}
+    chi2, n_all = 0.0, 0
+    for k in ids:
+        m = measured.channels[k]
+        s = on[k]
+        r = s - m
+        ok = np.isfinite(r)
+        n = int(ok.sum())
+        if n < 2:
+            raise ValueError(f"channel {k}: the simulation does not cover the measured passage")
+        rmse = float(np.sqrt(np.mean(r[ok] ** 2)))
+        scale = float(np.std(m[ok]))
+        nr = rmse / scale if scale > 0 else float("inf")
+        sg = max(sigma.get(k, np.nan), NOISE_FLOOR * scale) if np.isfinite(sigma.get(k, np.nan)) else scale
+        chi2 += float(np.sum((r[ok] / sg) ** 2))
+        n_all += n
+        j = int(np.nanargmax(np.abs(np.where(ok, r, 0.0))))
+        channels[k] = {"rmse": rmse, "nrmse": nr, "n": n, "t_peak": float(measured.t[j]),
+                       "window": _energy_window(measured.t, r)}
+        nrmse[k] = nr
+        residuals[k] = np.where(ok, r, np.nan)
+    J, gmean = objective_from_channels(nrmse, groups, weights)
+    return Comparison(float(shift), channels, gmean, J, chi2, n_all, residuals, on)
+
+
+__all__ = ["Comparison", "compare", "on_measured_base", "noise_sigma", "objective_from_channels"]

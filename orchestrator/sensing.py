@@ -1,0 +1,77 @@
+"""Run a scenario and read its virtual sensors (the simulated side of every comparison).
+
+:func:`simulate_sensors` runs the co-simulation in-process (the same model objects as
+the FMUs; :mod:`orchestrator.master`), records the track states at the output step and
+reads the layout's sensors from them (:mod:`track.sensors`). :func:`sensors_job` is the
+top-level (picklable) form that diagnosis and calibration send to worker processes: it
+takes the scenario as a validated raw mapping.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from track.model import build_track
+from track.sensors import compile_sensors, sensor_signals
+
+from .sensor_layout import SensorLayout, load_layout, resolve
+
+
+@dataclass
+class SensorRun:
+    """Simulated sensor signals of one run.
+
+    Attributes
+    ----------
+    t : ndarray, shape (nt,)
+        [s].
+    signals : dict
+        Sensor id -> signal (nt,), SI units.
+    error : str or None
+        Why the run stopped early (the signals then end there).
+    """
+
+    t: np.ndarray
+    signals: dict
+    error: str | None = None
+
+
+def layout_of(scenario) -> SensorLayout:
+    """The scenario's sensor layout (``sensors:``), or the default one."""
+    return load_layout(scenario.sensors)
+
+
+def simulate_sensors(scenario, layout: SensorLayout | None = None, reconstruct: bool = True) -> SensorRun:
+    """Co-simulate ``scenario`` in-process and read its sensors at every output step.
+
+    With ``reconstruct=False`` displacement sensors give their accelerometer's signal
+    [m/s^2]: :func:`orchestrator.objective.compare` and the synthetic measurements
+    reconstruct the displacement on the measured time base, the window the
+    measurement's own reconstruction used.
+    """
+    from .master import run_cosim
+
+    layout = layout_of(scenario) if layout is None else layout
+    res = run_cosim(scenario, backend="inprocess", record_states=True)
+    model = build_track(scenario.track)
+    compiled = compile_sensors(model, resolve(layout, model))
+    rec = res.track_record
+    t = np.asarray(rec["t"], float)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else scenario.simulation.output_step
+    sig = sensor_signals(model, compiled, rec["q"], rec["v"], rec["a"], dt,
+                         layout.displacement_highpass, reconstruct)
+    return SensorRun(t, sig, res.error)
+
+
+def sensors_job(raw: dict, base_dir: str, layout_path: str | None, reconstruct: bool = False) -> SensorRun:
+    """:func:`simulate_sensors` of a raw scenario mapping (for worker processes)."""
+    from .scenario import scenario_from_dict
+
+    scenario = scenario_from_dict(raw, source="<variant>", base_dir=Path(base_dir))
+    layout = load_layout(layout_path) if layout_path else None
+    return simulate_sensors(scenario, layout, reconstruct=reconstruct)
+
+
+__all__ = ["SensorRun", "simulate_sensors", "sensors_job", "layout_of"]

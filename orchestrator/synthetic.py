@@ -1,0 +1,165 @@
+"""Synthetic measurements: a scenario with an effect, sampled as a field campaign would be.
+
+:func:`synthesize` runs the scenario with the effect (a cause of
+:mod:`orchestrator.causes` at given parameters) and turns its virtual sensors into a
+measurement file:
+
+1. the acquisition samples at ``rate`` [Hz] (default: the layout's, at most half the
+   simulation's output rate so that the comparison's interpolation of the simulation
+   stays well below the noise), from an arbitrary trigger: the record's time origin is
+   ``trigger`` seconds before its first sample's simulation time (the diagnosis is not
+   told and aligns the passages itself);
+2. displacement channels are *reconstructed from accelerations*, as in the field: the
+   simulated acceleration at the sensor is sampled and integrated twice with the
+   layout's high-pass (:func:`track.sensors.displacement_from_acceleration`);
+3. noise: independent Gaussian white noise on every channel with standard deviation
+   ``noise`` x the channel's standard deviation over the record (default 2 %, a
+   well-kept strain-gauge / pressure-cell chain).
+
+:func:`hidden_effect` is the seeded generator of the hidden-effect tests: it draws an
+effect (type, sleeper, magnitude) from ranges a crossing survey would call relevant
+and returns it to the test — the diagnosis only ever gets the file.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from track.sensors import displacement_from_acceleration
+
+from .causes import CATALOGUE, N_GAPS
+from .measured import write_measured
+from .sensing import layout_of, simulate_sensors
+
+DEFAULT_NOISE = 0.02   # noise std / channel std
+MAX_RATE_SHARE = 0.5   # sampling rate <= this x the simulation's output rate (module docstring)
+TRIGGER_RANGE = (0.02, 0.08)   # s: record time of the first sample (drawn when not given)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A cause at given parameters (what a synthetic measurement hides); ``none``: no effect."""
+
+    cause: str
+    sleeper: int | None = None
+    parameters: dict = field(default_factory=dict)
+
+    def apply(self, raw: dict) -> dict:
+        """A copy of the raw scenario with the effect."""
+        if self.cause == "none":
+            return copy.deepcopy(raw)
+        kind = CATALOGUE[self.cause]
+        values = self.parameters["gaps"] if self.cause == "ballast_void" else [self.parameters[kind.names[0]]]
+        return kind.apply(raw, self.sleeper, values)
+
+    def as_dict(self) -> dict:
+        return {"cause": self.cause, "sleeper": self.sleeper, "parameters": dict(self.parameters)}
+
+
+def synthesize(scenario, effect: Effect, out_file, *, noise: float = DEFAULT_NOISE, seed: int = 0,
+               trigger: float | None = None, rate: float | None = None, crop: float = 0.01) -> dict:
+    """Write a synthetic measurement of ``scenario`` with ``effect`` (module docstring).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The nominal scenario (its sensor layout is used).
+    effect : Effect
+    out_file : path-like
+        ``.csv``, ``.h5`` or ``.mat``.
+    noise : float
+        Noise std as a share of each channel's std.
+    seed : int
+        Seed of the noise and of the trigger time.
+    trigger : float, optional
+        Record time of the first sample [s]; default drawn from :data:`TRIGGER_RANGE`.
+    rate : float, optional
+        Sampling rate [Hz]; default the layout's, capped at half the simulation's output rate.
+    crop : float
+        Time cut from both ends of the simulated window [s] (a record is a window of the passage).
+
+    Returns
+    -------
+    dict
+        What was hidden: effect, trigger, rate, noise, seed (for the test, not the diagnosis).
+    """
+    from .scenario import scenario_from_dict
+
+    rng = np.random.default_rng(seed)
+    layout = layout_of(scenario)
+    base_dir = Path(scenario.source).parent if scenario.source and Path(scenario.source).exists() else Path.cwd()
+    variant = scenario_from_dict(effect.apply(scenario.raw), source=f"<{effect.cause}>", base_dir=base_dir)
+    run = simulate_sensors(variant, layout, reconstruct=False)
+    if run.error:
+        raise RuntimeError(f"the synthetic run failed: {run.error}")
+    sim_rate = round(1.0 / float(np.median(np.diff(run.t))), 6)
+    rate = min(float(layout.rate if rate is None else rate), MAX_RATE_SHARE * sim_rate)
+    trigger = float(rng.uniform(*TRIGGER_RANGE) if trigger is None else trigger)
+    t0, t1 = run.t[0] + crop, run.t[-1] - crop
+    t_acq = t0 + np.arange(int(np.floor((t1 - t0) * rate)) + 1) / rate   # on the simulation's clock
+    channels = {}
+    for sid in layout.ids:
+        x = CubicSpline(run.t, run.signals[sid])(t_acq)
+        if layout.types[sid] == "displacement":   # x is the accelerometer's signal
+            x = displacement_from_acceleration(x, 1.0 / rate, layout.displacement_highpass)
+        channels[sid] = x + rng.normal(0.0, noise * float(np.std(x)), size=x.shape)
+    write_measured(out_file, t_acq - t0 + trigger, channels)
+    return {"effect": effect.as_dict(), "trigger": trigger, "time_offset": trigger - t0, "rate": rate,
+            "noise": noise, "seed": seed, "file": str(out_file)}
+
+
+# ------------------------------------------------------------------------------------------
+# The hidden-effect generator
+# ------------------------------------------------------------------------------------------
+HIDDEN_KINDS = ("ballast_void", "ballast_stiffness", "rail_pad_stiffness_local", "impact_angle",
+                "rail_pad_stiffness")
+
+
+def hidden_effect(seed: int, kind: str | None = None, sleepers=None) -> Effect:
+    """A random effect (seeded), as the hidden-effect tests use.
+
+    Parameters
+    ----------
+    seed : int
+    kind : str, optional
+        One of :data:`HIDDEN_KINDS` or ``none``; default drawn.
+    sleepers : sequence of int
+        Where local effects may be (the sleepers carrying sensors).
+
+    Ranges (relevant to a survey, inside the catalogue's bounds): a void of 0.6-2 mm
+    peak, shaped as a random hump or a one-sided wedge over the 6 points; bed stiffness
+    x0.35-0.6 or x1.8-3; pads of one sleeper x0.1-0.3 (a worn or missing pad) or x4-8;
+    global pads x0.3-0.5 or x2.5-5; impact angle 12-22 mrad (a worn nose; nominal 6).
+    """
+    rng = np.random.default_rng(seed)
+    kind = kind or str(rng.choice(HIDDEN_KINDS))
+    pick = (lambda lo_hi_a, lo_hi_b: rng.uniform(*(lo_hi_a if rng.random() < 0.5 else lo_hi_b)))
+    if kind == "none":
+        return Effect("none")
+    if kind == "ballast_void":
+        peak = rng.uniform(0.6e-3, 2.0e-3)
+        s = np.linspace(0.0, 1.0, N_GAPS)
+        if rng.random() < 0.5:
+            c, w = rng.uniform(0.3, 0.7), rng.uniform(0.25, 0.5)
+            shape = np.clip(1.0 - ((s - c) / w) ** 2, 0.0, None)
+        else:
+            shape = s if rng.random() < 0.5 else s[::-1]
+        gaps = [float(round(g, 6)) for g in peak * shape / shape.max()]
+        return Effect("ballast_void", int(rng.choice(sleepers)), {"gaps": gaps})
+    if kind == "ballast_stiffness":
+        return Effect("ballast_stiffness", None, {"stiffness_scale": float(pick((0.35, 0.6), (1.8, 3.0)))})
+    if kind == "rail_pad_stiffness_local":
+        return Effect("rail_pad_stiffness", int(rng.choice(sleepers)),
+                      {"stiffness_scale": float(pick((0.1, 0.3), (4.0, 8.0)))})
+    if kind == "rail_pad_stiffness":
+        return Effect("rail_pad_stiffness", None, {"stiffness_scale": float(pick((0.3, 0.5), (2.5, 5.0)))})
+    if kind == "impact_angle":
+        return Effect("impact_angle", None, {"impact_angle": float(rng.uniform(0.012, 0.022))})
+    raise ValueError(f"unknown effect kind {kind!r} (one of {', '.join(HIDDEN_KINDS)}, none)")
+
+
+__all__ = ["Effect", "synthesize", "hidden_effect", "HIDDEN_KINDS", "DEFAULT_NOISE"]

@@ -1,0 +1,274 @@
+"""Virtual sensors: what a measuring campaign's transducers would read from the track model.
+
+A sensor is a linear map of the track state, except the ballast pressure cell, which
+reads the (bi-linear) bushing forces:
+
+================  ============================================================  ========
+type              reading                                                       unit
+================  ============================================================  ========
+``pressure``      sleeper-ballast contact pressure at ``coord`` on a sleeper,   Pa
+                  linear between the two nearest ballast bushings
+``acceleration``  vertical acceleration at ``coord`` on a body                  m/s^2
+``displacement``  vertical displacement at ``coord`` on a body *reconstructed  m
+                  from its accelerometer*, as the field team does it: the
+                  simulated acceleration there goes through the very same
+                  double integration with high-pass
+                  (:func:`displacement_from_acceleration`) as the measured one
+                  (a high-pass of the simulated displacement would not do: the
+                  sleeper's displacement trend over a record is not in its
+                  acceleration, and differs by up to 20 % of the signal)
+``strain``        engineering longitudinal strain of a gauge of length          -
+                  ``gauge_length`` centred at ``coord``, at height ``z`` above
+                  the body's neutral axis: eps = -z (theta(c + L/2) -
+                  theta(c - L/2)) / L, theta the section rotation (seed 000
+                  eq. 1 with its typo fixed: strain = elongation / L)
+================  ============================================================  ========
+
+Signs: displacement and acceleration up +, pressure compressive +, strain tensile +.
+
+:func:`compile_sensors` turns a list of :class:`Sensor` into row vectors on the model's
+generalized coordinates once; :func:`sensor_signals` then reads whole histories with a
+few matrix products (no Python loop over time steps).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .model import TrackModel
+
+SENSOR_TYPES = ("pressure", "displacement", "acceleration", "strain")
+GAUGE_LENGTH = 0.1   # m: default strain-gauge base (a 100 mm gauge; also the beam element length)
+RECONSTRUCTION_HIGHPASS = 5.0   # Hz: default corner of the displacement reconstruction filter
+RECONSTRUCTION_ORDER = 2        # Butterworth order (applied forward and backward: zero phase)
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """One transducer.
+
+    Attributes
+    ----------
+    id : str
+        Channel name (the column in sensor CSVs).
+    type : str
+        One of :data:`SENSOR_TYPES`.
+    group : str
+        Sensor group (A-F as in seed 000 Fig. 2); objective weights are per group.
+    body : str
+        Body name in the track model (``sleeper_21``, ``crossing``, ...).
+    coord : float
+        Track coordinate on the body: x for rails, y for sleepers [m].
+    z : float
+        Strain gauges: height above the body's neutral axis [m] (up +).
+    gauge_length : float
+        Strain gauges: base length [m].
+    """
+
+    id: str
+    type: str
+    group: str
+    body: str
+    coord: float
+    z: float = 0.0
+    gauge_length: float = GAUGE_LENGTH
+
+
+@dataclass
+class CompiledSensors:
+    """Sensor rows on the generalized coordinates (see :func:`compile_sensors`).
+
+    Attributes
+    ----------
+    sensors : tuple of Sensor
+    Cq : ndarray, shape (ns, n)
+        Rows of the sensors that read displacements q (strain); zero rows else.
+    Ca : ndarray, shape (ns, n)
+        Rows of the sensors that read accelerations (acceleration, displacement).
+    Pb : ndarray, shape (ns, nb)
+        Weights of the pressure sensors on the ballast bushings' pressures.
+    """
+
+    sensors: tuple
+    Cq: np.ndarray
+    Ca: np.ndarray
+    Pb: np.ndarray
+
+    @property
+    def ids(self) -> list[str]:
+        return [s.id for s in self.sensors]
+
+
+def _rotation_row(model: TrackModel, body: str, coord: float) -> np.ndarray:
+    """Section rotation at ``coord`` on a beam body as a row on q (linear between nodes)."""
+    b = model.body(body)
+    s = np.clip(b.local(coord), b.fom.s[0], b.fom.s[-1])
+    i = int(np.clip(np.searchsorted(b.fom.s, s) - 1, 0, b.fom.s.size - 2))
+    xi = (s - b.fom.s[i]) / (b.fom.s[i + 1] - b.fom.s[i])
+    row = np.zeros(model.n)
+    row[b.gdofs] = (1.0 - xi) * b.rom.T[2 * i + 1] + xi * b.rom.T[2 * i + 3]
+    return row
+
+
+def strain_row(model: TrackModel, body: str, coord: float, z: float, gauge_length: float = GAUGE_LENGTH) -> np.ndarray:
+    """Engineering strain of a gauge on a beam body as a row on q, shape (n,).
+
+    eps = -z (theta(c + L/2) - theta(c - L/2)) / L: the elongation of the fibre at
+    height ``z`` between the gauge's ends divided by its length. In pure bending it
+    equals -z M / (EI) exactly (theta is linear there).
+    """
+    half = 0.5 * gauge_length
+    return -z * (_rotation_row(model, body, coord + half) - _rotation_row(model, body, coord - half)) / gauge_length
+
+
+def displacement_row(model: TrackModel, body: str, coord: float) -> np.ndarray:
+    """Vertical displacement at ``coord`` on ``body`` as a row on q, shape (n,)."""
+    pm = model.point(body, coord)
+    row = np.zeros(model.n)
+    row[pm.gidx] = pm.weights
+    return row
+
+
+def pressure_weights(model: TrackModel, sleeper: int, y: float) -> np.ndarray:
+    """Weights on all bushing pressures for a pressure cell at lateral position ``y``, shape (nb,)."""
+    bal = model.ballast
+    idx = np.flatnonzero(bal.sleeper == sleeper)
+    if idx.size == 0:
+        raise ValueError(f"sleeper {sleeper} has no ballast bushings")
+    ys = bal.y[idx]
+    order = np.argsort(ys)
+    idx, ys = idx[order], ys[order]
+    w = np.zeros(bal.y.size)
+    if y <= ys[0] or idx.size == 1:
+        w[idx[0]] = 1.0
+    elif y >= ys[-1]:
+        w[idx[-1]] = 1.0
+    else:
+        j = int(np.searchsorted(ys, y)) - 1
+        xi = (y - ys[j]) / (ys[j + 1] - ys[j])
+        w[idx[j]], w[idx[j + 1]] = 1.0 - xi, xi
+    return w
+
+
+def compile_sensors(model: TrackModel, sensors) -> CompiledSensors:
+    """Rows of every sensor on the model's coordinates.
+
+    Raises
+    ------
+    ValueError
+        An unknown type, body, or a pressure cell on a body that is not a sleeper.
+    """
+    sensors = tuple(sensors)
+    ns = len(sensors)
+    Cq, Ca = np.zeros((ns, model.n)), np.zeros((ns, model.n))
+    Pb = np.zeros((ns, model.ballast.y.size))
+    for i, s in enumerate(sensors):
+        try:
+            b = model.body(s.body)
+        except KeyError:
+            raise ValueError(f"sensor {s.id}: the track model has no body {s.body!r}") from None
+        if s.type == "pressure":
+            if b.sleeper < 0:
+                raise ValueError(f"sensor {s.id}: a pressure cell must be under a sleeper, not on {s.body!r}")
+            Pb[i] = pressure_weights(model, b.sleeper, s.coord)
+        elif s.type in ("displacement", "acceleration"):   # both read an accelerometer
+            Ca[i] = displacement_row(model, s.body, s.coord)
+        elif s.type == "strain":
+            Cq[i] = strain_row(model, s.body, s.coord, s.z, s.gauge_length)
+        else:
+            raise ValueError(f"sensor {s.id}: unknown type {s.type!r} (one of {', '.join(SENSOR_TYPES)})")
+    return CompiledSensors(sensors, Cq, Ca, Pb)
+
+
+def sensor_signals(model: TrackModel, compiled: CompiledSensors, q: np.ndarray, v: np.ndarray,
+                   a: np.ndarray, dt: float, highpass: float = RECONSTRUCTION_HIGHPASS,
+                   reconstruct: bool = True) -> dict[str, np.ndarray]:
+    """Simulated sensor signals from state histories.
+
+    Parameters
+    ----------
+    model : TrackModel
+    compiled : CompiledSensors
+    q, v, a : ndarray, shape (nt, n)
+        Displacements [m], velocities [m/s], accelerations [m/s^2] at uniform times.
+    dt : float
+        Time step of the histories [s] (for the displacement reconstruction filter).
+    highpass : float
+        Corner [Hz] of the displacement reconstruction (:func:`displacement_from_acceleration`).
+    reconstruct : bool
+        ``False``: displacement sensors give their accelerometer's signal [m/s^2], to be
+        reconstructed later on another time base (as the comparison with a measurement
+        does, on the measured window).
+
+    Returns
+    -------
+    dict
+        Sensor id -> signal, shape (nt,), SI units.
+    """
+    q, v, a = (np.atleast_2d(np.asarray(x, float)) for x in (q, v, a))
+    out_q = q @ compiled.Cq.T
+    out_a = a @ compiled.Ca.T
+    D = model.ballast.dof
+    p = model.ballast.pressure(q[:, D], v[:, D]) @ compiled.Pb.T
+    signals = {}
+    for i, s in enumerate(compiled.sensors):
+        if s.type == "pressure":
+            signals[s.id] = p[:, i]
+        elif s.type == "acceleration" or (s.type == "displacement" and not reconstruct):
+            signals[s.id] = out_a[:, i]
+        elif s.type == "displacement":
+            signals[s.id] = displacement_from_acceleration(out_a[:, i], dt, highpass)
+        else:
+            signals[s.id] = out_q[:, i]
+    return signals
+
+
+# ----------------------------------------------------------------------------------------
+# Displacement from acceleration: one filter for the measured and the simulated signal
+# ----------------------------------------------------------------------------------------
+def _highpass_gain(n: int, dt: float, f_c: float, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies [Hz] of an rfft of length n and the zero-phase high-pass gain |H|^2 there."""
+    f = np.fft.rfftfreq(n, dt)
+    with np.errstate(divide="ignore"):
+        r = np.where(f > 0, (f_c / np.where(f > 0, f, 1.0)) ** (2 * order), np.inf)
+    return f, 1.0 / (1.0 + r)   # |H_butterworth|^2: the filter run forward and backward
+
+
+def displacement_from_acceleration(acc: np.ndarray, dt: float, f_c: float = RECONSTRUCTION_HIGHPASS,
+                                   order: int = RECONSTRUCTION_ORDER) -> np.ndarray:
+    """Displacement reconstructed from an acceleration record (what a field team does).
+
+    Double integration in the frequency domain, X = -A / (2 pi f)^2, with the same
+    zero-phase Butterworth high-pass (|H|^2: forward and backward), which removes the
+    integration's unbounded low-frequency gain. For an acceleration that is the second derivative
+    of a displacement w it is w without its mean, its linear trend over the record
+    (not in the acceleration) and its content well below ``f_c``.
+
+    Parameters
+    ----------
+    acc : ndarray, shape (nt,)
+        [m/s^2] at uniform times.
+    dt : float
+        [s].
+    f_c : float
+        Corner frequency [Hz] of the high-pass.
+    order : int
+        Butterworth order.
+
+    Returns
+    -------
+    ndarray, shape (nt,)
+        [m].
+    """
+    acc = np.asarray(acc, float)
+    n = acc.shape[0]
+    f, g = _highpass_gain(n, dt, f_c, order)
+    A = np.fft.rfft(acc - acc.mean())
+    with np.errstate(divide="ignore", invalid="ignore"):
+        X = np.where(f > 0, -A / (2.0 * np.pi * np.where(f > 0, f, 1.0)) ** 2, 0.0) * g
+    return np.fft.irfft(X, n=n)
+
+
+__all__ = ["Sensor", "SENSOR_TYPES", "CompiledSensors", "compile_sensors", "sensor_signals", "strain_row",
+           "displacement_row", "pressure_weights", "displacement_from_acceleration"]
