@@ -1,5 +1,6 @@
 """The ``turnout`` command line: parses arguments and delegates to the orchestrator's jobs
-(:mod:`orchestrator.jobs`, ``build_job``, ``ssp``, ``sweep``, ``figures``).
+(:mod:`orchestrator.jobs`, ``build_job``, ``ssp``, ``sweep``, ``figures``, ``calibrate``,
+``diagnose``, ``synthetic``).
 
 No logic lives here (as in FMPy's ``command_line.py``). User errors
 (:class:`~orchestrator.errors.UserInputError`, which includes
@@ -145,6 +146,65 @@ def build_parser() -> argparse.ArgumentParser:
     swp.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
     swp.set_defaults(handler=_cmd_sweep)
 
+    cal = sub.add_parser("calibrate", help="surrogate calibration of scenario parameters against a measurement",
+                         description="Calibrate parameters of SCENARIO against a measurement (DESIGN.md section 5): "
+                                     "Latin hypercube, thin-plate-spline response surface (smoothing by "
+                                     "cross-validation), sensitivity -> narrowed bounds, second hypercube + corners, "
+                                     "bounded trust-constr optimisation with multistart, confirmation run. Writes "
+                                     "calibrated.yaml, calibration.json, report.md and plots into DIR. Resumable: "
+                                     "the same command again does only the unfinished runs.")
+    cal.add_argument("scenario", metavar="SCENARIO", type=Path, help="nominal scenario YAML file")
+    cal.add_argument("--measured", metavar="FILE", type=Path, required=True,
+                     help="measured sensor data (.csv, .h5 or .mat; DESIGN.md section 4.3)")
+    cal.add_argument("--params", metavar="LIST",
+                     help="comma-separated parameters, each optionally =LO:HI[:log|:lin] (SI units): h1, h2, angle, "
+                          "gaps@K (the 6 void gaps of sleeper K), gapI@K (one of them, I=1..6), pad@K, or a "
+                          "scenario key with bounds such as track.ballast.stiffness_scale=0.3:3:log; K is an "
+                          "index or T, T+1, T-2 (crossing transition sleeper). Default: gaps@T,h1,h2")
+    cal.add_argument("--out", metavar="DIR", type=Path,
+                     help="output folder (default: results/<scenario name>-calibration)")
+    cal.add_argument("--n1", metavar="N", type=_positive_int, default=500, help="runs of the first hypercube (default 500)")
+    cal.add_argument("--n2", metavar="N", type=_positive_int, default=500,
+                     help="runs of the second hypercube in the narrowed bounds (default 500; plus 2^k corners)")
+    cal.add_argument("--seed", metavar="S", type=int, default=0, help="seed of the designs and starts (default 0)")
+    cal.add_argument("--workers", metavar="N", type=_positive_int, default=2,
+                     help="local worker processes (default: 2; ignored with --scheduler)")
+    cal.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786")
+    cal.add_argument("--no-progress", action="store_true", help="do not show progress bars")
+    cal.set_defaults(handler=_cmd_calibrate)
+
+    dia = sub.add_parser("diagnose", help="residuals -> named cause -> extended model -> gain",
+                         description="Compare SCENARIO with a measured passage, screen and fit the catalogue of "
+                                     "model extensions (ballast_void, ballast_stiffness, rail_pad_stiffness, "
+                                     "impact_angle), name the cause (or none) and measure the gain. Writes "
+                                     "diagnosis.json, extended.yaml, report.md and plots into DIR.")
+    dia.add_argument("scenario", metavar="SCENARIO", type=Path, help="nominal scenario YAML file")
+    dia.add_argument("--measured", metavar="FILE", type=Path, required=True,
+                     help="measured sensor data (.csv, .h5 or .mat; DESIGN.md section 4.3)")
+    dia.add_argument("--validate", metavar="FILE@SPEED", action="append", default=[],
+                     help="a further measured passage and its speed [m/s], compared before/after (repeatable)")
+    dia.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>-diagnosis)")
+    dia.add_argument("--workers", metavar="N", type=_positive_int, default=2,
+                     help="local worker processes (default: 2; ignored with --scheduler)")
+    dia.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786")
+    dia.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+    dia.set_defaults(handler=_cmd_diagnose)
+
+    syn = sub.add_parser("synthesize", help="write a synthetic measurement (a scenario with a hidden effect + noise)",
+                         description="Run SCENARIO with an effect and write what its sensors would have measured "
+                                     "(sampled, displacements reconstructed from accelerations, white noise), for "
+                                     "demos and tests of `diagnose` and `calibrate`.")
+    syn.add_argument("scenario", metavar="SCENARIO", type=Path, help="nominal scenario YAML file")
+    syn.add_argument("--out", metavar="FILE", type=Path, required=True, help="output file (.csv, .h5 or .mat)")
+    syn.add_argument("--effect", metavar="KEY=VALUE", action="append", dest="overrides", default=[],
+                     help="the hidden effect as scenario overrides, e.g. "
+                          "--effect 'track.ballast.voids=[{sleeper: 21, gaps: [0, 1e-3, 1e-3, 1e-3, 1e-3, 0]}]'")
+    syn.add_argument("--speed", metavar="V", type=float, help="vehicle speed [m/s] (same stretch of track)")
+    syn.add_argument("--noise", metavar="SHARE", type=float, default=None,
+                     help="noise std as a share of each channel's std (default 0.01)")
+    syn.add_argument("--seed", metavar="S", type=int, default=0, help="seed of the noise and trigger time")
+    syn.set_defaults(handler=_cmd_synthesize)
+
     figs = sub.add_parser("figures", help="regenerate the source papers' figures",
                           description="Run the seed studies (resumable, on the sweep executor) and write the "
                                       "figures of seed 001 (Figs. 3-7) and seed 000 (Table 1, beam) into DIR.")
@@ -228,6 +288,47 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         print(f"{PROG}: error: {one_line(result.summary())}", file=sys.stderr)
         return EXIT_INCOMPLETE
     print(f"{PROG}: sweep: {result.summary()}")
+    return 0
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from .scenario import load_scenario
+
+    calibration = importlib.import_module("orchestrator.calibrate")
+    out_dir = args.out if args.out is not None else \
+        RESULTS_DIR / f"{load_scenario(args.scenario).name}-calibration"
+    try:
+        result = calibration.calibrate(args.scenario, args.measured, out_dir, params=args.params, n1=args.n1,
+                                       n2=args.n2, seed=args.seed, workers=args.workers, scheduler=args.scheduler,
+                                       progress=not args.no_progress)
+    except calibration.CalibrationIncomplete as exc:
+        print(f"{PROG}: error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_INCOMPLETE
+    s = result.summary
+    print(f"{PROG}: calibrate: J {s['objective_before']:.4g} -> {s['objective_after']:.4g}; "
+          f"scenario {result.scenario_file}, report {out_dir / 'report.md'}")
+    return 0
+
+
+def _cmd_diagnose(args: argparse.Namespace) -> int:
+    from .scenario import load_scenario
+
+    diagnosis = importlib.import_module("orchestrator.diagnose")
+    out_dir = args.out if args.out is not None else RESULTS_DIR / f"{load_scenario(args.scenario).name}-diagnosis"
+    result = diagnosis.diagnose(args.scenario, args.measured, out_dir, validate=args.validate, workers=args.workers,
+                                scheduler=args.scheduler, progress=not args.no_progress)
+    named = result["named_cause"]
+    where = f" at sleeper {named['sleeper']}" if "sleeper" in named else ""
+    print(f"{PROG}: diagnose: cause {named['cause']}{where}; J {result['baseline']['objective']:.4g} -> "
+          f"{named['objective']:.4g} (gain {100 * result['gain']['total']:.1f} %); report {out_dir / 'report.md'}")
+    return 0
+
+
+def _cmd_synthesize(args: argparse.Namespace) -> int:
+    synthetic = importlib.import_module("orchestrator.synthetic")
+    info = synthetic.synthesize_file(args.scenario, args.out, overrides=args.overrides, speed=args.speed,
+                                     noise=args.noise, seed=args.seed)
+    print(f"{PROG}: synthesize: {args.out} ({info['rate']:g} Hz, noise {info['noise']:g})")
     return 0
 
 

@@ -71,7 +71,7 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
         "wall_seconds": res.stats, "error": res.error,
     }
     # ---- signals first: nothing computed is lost if a later step fails
-    _write_signals(out_dir, res)
+    _write_signals(out_dir, res, _virtual_sensors(scenario, model, res))
     wheels = range(res.Fz.shape[1])
     Q0 = 0.5 * scenario.vehicle.axle_load
     summary["contact"] = {f"wheel{i + 1}": {"max_Fz": float(np.nanmax(res.Fz[:, i])),
@@ -118,9 +118,25 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     return summary
 
 
-def _write_signals(out_dir: Path, res) -> None:
-    """sensors.csv: time and the monitoring signals of every wheel (SI units)."""
-    cols = {"time": res.t}
+def _virtual_sensors(scenario, model, res) -> dict:
+    """The sensor layout's signals (DESIGN.md §4.3) at the output times; {} without a track record."""
+    from track.sensors import compile_sensors, sensor_signals
+
+    from .sensing import layout_of
+    from .sensor_layout import resolve
+
+    rec = res.track_record
+    if rec is None or "a" not in rec or len(rec["t"]) < 2 or len(rec["t"]) != len(res.t):
+        return {}
+    layout = layout_of(scenario)
+    compiled = compile_sensors(model, resolve(layout, model))
+    dt = float(np.median(np.diff(rec["t"])))
+    return sensor_signals(model, compiled, rec["q"], rec["v"], rec["a"], dt, layout.displacement_highpass)
+
+
+def _write_signals(out_dir: Path, res, sensors: dict) -> None:
+    """sensors.csv: time, the layout's sensors and the monitoring signals of every wheel (SI units)."""
+    cols = {"time": res.t, **sensors}
     for i in range(res.Fz.shape[1]):
         n = i + 1
         cols[f"wheel{n}_Fz"] = res.Fz[:, i]

@@ -635,6 +635,8 @@ def _build_schema() -> _Map:
             "f_cut": _Field(pos, R["f_cut"], "[Hz] model cut-off frequency"),
             "mode_factor": _Field(_Num(ge=1), R["mode_factor"], "[-] keep fixed-interface modes up to this x f_cut"),
             "element_length": _Field(pos, R["element_length"], "[m] max FE element length"),
+            "solid_mesh_size": _Field(pos, R["solid_mesh_size"],
+                                      "[m] mesh size of the 3D crossing rail (track.model: solid)"),
         }), _SUB),
         "structural_damping": _Field(nonneg, T["structural_damping"], "[s] stiffness-proportional Rayleigh beta"),
         "dipped_joint": _Field(_Num(ge=0, le=MAX_IMPACT_ANGLE, unit=" rad"), T["dipped_joint"],

@@ -8,6 +8,7 @@ takes the scenario as a validated raw mapping.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -65,6 +66,18 @@ def simulate_sensors(scenario, layout: SensorLayout | None = None, reconstruct: 
     return SensorRun(t, sig, res.error)
 
 
+def variant_for_speed(raw: dict, speed: float) -> dict:
+    """A raw scenario at another speed [m/s], over the same stretch of track (duration scaled)."""
+    raw = copy.deepcopy(raw)
+    v0 = float(raw["vehicle"]["speed"])
+    raw["vehicle"]["speed"] = float(speed)
+    sim = raw["simulation"]
+    every = max(1, int(round(sim["output_step"] / sim["step"])))
+    dur = sim["duration"] * v0 / speed
+    sim["duration"] = float(np.floor(dur / (every * sim["step"]) + 1e-9) * every * sim["step"])
+    return raw
+
+
 def sensors_job(raw: dict, base_dir: str, layout_path: str | None, reconstruct: bool = False) -> SensorRun:
     """:func:`simulate_sensors` of a raw scenario mapping (for worker processes)."""
     from .scenario import scenario_from_dict
@@ -74,4 +87,4 @@ def sensors_job(raw: dict, base_dir: str, layout_path: str | None, reconstruct: 
     return simulate_sensors(scenario, layout, reconstruct=reconstruct)
 
 
-__all__ = ["SensorRun", "simulate_sensors", "sensors_job", "layout_of"]
+__all__ = ["variant_for_speed", "SensorRun", "simulate_sensors", "sensors_job", "layout_of"]

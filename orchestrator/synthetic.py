@@ -13,7 +13,7 @@ measurement file:
    simulated acceleration at the sensor is sampled and integrated twice with the
    layout's high-pass (:func:`track.sensors.displacement_from_acceleration`);
 3. noise: independent Gaussian white noise on every channel with standard deviation
-   ``noise`` x the channel's standard deviation over the record (default 2 %, a
+   ``noise`` x the channel's standard deviation over the record (default 1 %, a
    well-kept strain-gauge / pressure-cell chain).
 
 :func:`hidden_effect` is the seeded generator of the hidden-effect tests: it draws an
@@ -32,10 +32,11 @@ from scipy.interpolate import CubicSpline
 from track.sensors import displacement_from_acceleration
 
 from .causes import CATALOGUE, N_GAPS
+from .errors import UserInputError
 from .measured import write_measured
 from .sensing import layout_of, simulate_sensors
 
-DEFAULT_NOISE = 0.02   # noise std / channel std
+DEFAULT_NOISE = 0.01   # noise std / channel std
 MAX_RATE_SHARE = 0.5   # sampling rate <= this x the simulation's output rate (module docstring)
 TRIGGER_RANGE = (0.02, 0.08)   # s: record time of the first sample (drawn when not given)
 
@@ -112,6 +113,23 @@ def synthesize(scenario, effect: Effect, out_file, *, noise: float = DEFAULT_NOI
             "noise": noise, "seed": seed, "file": str(out_file)}
 
 
+def synthesize_file(scenario_path, out_file, overrides=(), speed: float | None = None, noise: float | None = None,
+                    seed: int = 0) -> dict:
+    """:func:`synthesize` for the command line: the effect given as scenario overrides."""
+    from .scenario import load_scenario, scenario_from_dict
+    from .sensing import variant_for_speed
+
+    scenario = load_scenario(scenario_path, overrides=list(overrides))
+    if speed is not None:
+        if not speed > 0:
+            raise UserInputError(f"--speed must be > 0 m/s, got {speed!r}")
+        scenario = scenario_from_dict(variant_for_speed(scenario.raw, speed), source=str(scenario_path),
+                                      base_dir=Path(scenario_path).parent)
+    if noise is not None and not 0.0 <= noise < 1.0:
+        raise UserInputError(f"--noise must be a share in [0, 1), got {noise!r}")
+    return synthesize(scenario, Effect("none"), out_file, noise=DEFAULT_NOISE if noise is None else noise, seed=seed)
+
+
 # ------------------------------------------------------------------------------------------
 # The hidden-effect generator
 # ------------------------------------------------------------------------------------------
@@ -162,4 +180,4 @@ def hidden_effect(seed: int, kind: str | None = None, sleepers=None) -> Effect:
     raise ValueError(f"unknown effect kind {kind!r} (one of {', '.join(HIDDEN_KINDS)}, none)")
 
 
-__all__ = ["Effect", "synthesize", "hidden_effect", "HIDDEN_KINDS", "DEFAULT_NOISE"]
+__all__ = ["Effect", "synthesize", "synthesize_file", "hidden_effect", "HIDDEN_KINDS", "DEFAULT_NOISE"]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .elements import deflection_shape, shear_parameter, timoshenko_matrices
+from .elements import deflection_shape, rotation_shape, shear_parameter, timoshenko_matrices
 from .params import BeamProfile
 
 DUPLICATE_TOL = 1e-6  # m: mesh points closer than this are one node
@@ -95,6 +95,18 @@ class BeamBody:
         L = sl[e + 1] - sl[e]
         xi = min(max((s - sl[e]) / L, 0.0), 1.0)
         return e, deflection_shape(xi, L, self._phi_list[e])
+
+    def rotation_row(self, s: float) -> tuple[int, np.ndarray]:
+        """Section rotation at ``s`` [m] as weights on the dofs of one element.
+
+        Returns ``(e, weights)`` with ``theta(s) = weights @ u[2e:2e+4]`` [rad]
+        (:func:`track.elements.rotation_shape`).
+        """
+        sl = self._s_list
+        e = min(max(bisect_right(sl, s) - 1, 0), len(sl) - 2)
+        L = sl[e + 1] - sl[e]
+        xi = min(max((s - sl[e]) / L, 0.0), 1.0)
+        return e, rotation_shape(xi, L, self._phi_list[e])
 
     def __post_init__(self):
         self._s_list = self.s.tolist()

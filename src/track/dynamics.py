@@ -68,6 +68,7 @@ class _SharedFactor:
     lu: object
     influence: dict = field(default_factory=dict)
     Zb: np.ndarray | None = None
+    Zb_have: np.ndarray | None = None
     Zb_dofs: np.ndarray | None = None
     new: bool = True
 
@@ -276,16 +277,27 @@ class TrackIntegrator:
             self.counters.solves += rows.shape[0]
         return Ze @ point.shape
 
-    def _ballast_influence(self) -> np.ndarray:
-        """``A^{-1} e_d`` for every ballast dof d, as rows (shape (nb, n)), computed once."""
+    def _ballast_rows(self, idx: np.ndarray) -> np.ndarray:
+        """``A^{-1} e_d`` as rows for the ballast bushings ``idx`` (shape (len(idx), n)).
+
+        Computed when first needed, a few bushings at a time (a passage changes the
+        contact state of the bushings near the wheels only), and kept with the shared
+        factorization.
+        """
         sh = self._shared
+        nb = self._D.size
         if sh.Zb is None or sh.Zb_dofs is None or not np.array_equal(sh.Zb_dofs, self._D):
-            E = np.zeros((self.model.n, self._D.size))
-            E[self._D, np.arange(self._D.size)] = 1.0
-            sh.Zb = np.ascontiguousarray(self._lu.solve(E).T)
+            sh.Zb = np.zeros((nb, self.model.n))
+            sh.Zb_have = np.zeros(nb, bool)
             sh.Zb_dofs = self._D.copy()
-            self.counters.solves += self._D.size
-        return sh.Zb
+        missing = np.unique(idx[~sh.Zb_have[idx]])
+        if missing.size:
+            E = np.zeros((self.model.n, missing.size))
+            E[self._D[missing], np.arange(missing.size)] = 1.0
+            sh.Zb[missing] = self._lu.solve(E).T
+            sh.Zb_have[missing] = True
+            self.counters.solves += missing.size
+        return sh.Zb[idx]
 
     def step_contacts(self, points: Sequence[PointMap], z_wheel: np.ndarray, surfaces: Sequence[tuple],
                       c_h: float = HERTZ_CONSTANT) -> np.ndarray:
@@ -388,7 +400,7 @@ class TrackIntegrator:
             # a bushing opened or closed: correct the linear solution through the
             # ballast influence rows instead of a new solve
             sel = np.flatnonzero(np.abs(dD) > FORCE_TOL)
-            acc_lin = acc_lin + a1 * (dD[sel] @ self._ballast_influence()[cand[sel]])
+            acc_lin = acc_lin + a1 * (dD[sel] @ self._ballast_rows(cand[sel]))
             corr = new_corr
         else:
             raise ConvergenceError(

@@ -104,3 +104,30 @@ def deflection_shape(xi, L: float, phi: float) -> np.ndarray:
          c * (-2 * x3 + 3 * x2 + phi * xi),
          c * L * (x3 - (1 - phi / 2) * x2 - (phi / 2) * xi))
     return np.stack(N, axis=-1) if np.ndim(xi) else np.array(N)
+
+
+def rotation_shape(xi, L: float, phi: float) -> np.ndarray:
+    """Interdependent-interpolation shape functions of the section rotation.
+
+    The companions of :func:`deflection_shape` (Friedman & Kosmatka 1993): for
+    ``phi = 0`` they are its derivatives ``dN/ds``.
+
+    Parameters
+    ----------
+    xi : float or ndarray, shape (m,)
+        Local coordinate s/L in [0, 1].
+    L : float
+        Element length [m].
+    phi : float
+        Shear parameter of the element.
+
+    Returns
+    -------
+    N : ndarray, shape (4,) or (m, 4)
+        ``th(xi) = N @ [w1, th1, w2, th2]`` [rad].
+    """
+    xi = np.asarray(xi, dtype=float)
+    c = 1.0 / (1.0 + phi)
+    a = 6.0 * c / L * (xi * xi - xi)
+    N = (a, c * (3 * xi * xi - (4 + phi) * xi + 1 + phi), -a, c * (3 * xi * xi - (2 - phi) * xi))
+    return np.stack(N, axis=-1)

@@ -9,19 +9,25 @@ are nonlinear).
 Global coordinates are the union of every body's reduced coordinates; boundary
 coordinates of rail ends joined at a :class:`track.layout.Joint` share one global
 coordinate (a rigid weld).
+
+``params.model == "solid"``: the part of the crossing block around the wheel
+transfer is a reduced 3D solid (:mod:`track.solid.crossing`, body ``crossing``)
+between two beam parts of the block (``crossing_front``, ``crossing_rear``); its
+end couplings' ``(w, theta)`` are joint coordinates shared with their end nodes,
+and its seats are two bushings each. Everything else is the beam model.
 """
 from __future__ import annotations
 
 import hashlib
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
 
 from .ballast import Ballast
 from .bodies import BeamBody, beam_body, mesh_line
-from .layout import Layout, build_layout
+from .layout import Joint, Layout, RailBody, RunningSegment, build_layout
 from .params import GRAVITY, TrackParams
 from .reduction import ReducedBody, craig_bampton, element_residual, static_correction
 
@@ -41,8 +47,10 @@ class Body:
         For sleepers the track coordinate of the sleeper [m]; NaN for rails.
     sleeper : int
         Sleeper index, -1 for rails.
-    fom : BeamBody
+    fom : BeamBody or track.solid.crossing.SolidCrossing
+        The full-order model; a ``SolidCrossing`` for the solid crossing rail.
     rom : ReducedBody
+        For the solid, ``T`` recovers the solid's displacements (3 per node).
     gdofs : ndarray of int, shape (nr,)
         Global index of each reduced coordinate.
     """
@@ -57,13 +65,31 @@ class Body:
     gdofs: np.ndarray
     residual_blocks: dict = field(default_factory=dict, repr=False)  # element -> 4x4 [m/N]
 
+    @property
+    def solid(self) -> bool:
+        """True for the 3D solid crossing rail (:mod:`track.solid.crossing`)."""
+        return not isinstance(self.fom, BeamBody)
+
     def local(self, coord: float) -> float:
         """Body coordinate s [m] of a track coordinate (x for rails, y for sleepers)."""
         return coord - self.origin
 
     def coords(self) -> np.ndarray:
-        """Track coordinates of the FE nodes [m] (x for rails, y for sleepers)."""
-        return self.origin + self.fom.s
+        """Track coordinates of the FE nodes [m] (x for rails, y for sleepers).
+
+        For the solid: of its output stations (:attr:`SolidCrossing.station_s`).
+        """
+        return self.origin + (self.fom.station_s if self.solid else self.fom.s)
+
+    def load_rows(self, element: int) -> np.ndarray:
+        """Rows of ``T`` (k, nr) on which a point load in ``element`` acts.
+
+        Beam: the 4 dofs of the element (weights: :meth:`BeamBody.shape_row`);
+        solid: the two contact-path nodes of the segment (:meth:`SolidCrossing.path_row`).
+        """
+        if self.solid:
+            return self.fom.segment_rows(element)
+        return self.rom.T[2 * element:2 * element + 4, :]
 
 
 @dataclass(slots=True)
@@ -115,6 +141,8 @@ class BuildStats:
     t_mesh_assembly: float = 0.0
     t_reduction: float = 0.0
     t_global: float = 0.0
+    t_solid_mesh: float = 0.0       # solid crossing rail: gmsh + assembly + tie + Craig–Bampton [s] (0 if cached)
+    t_solid_reduction: float = 0.0  # its output rows: section deflections and moments [s] (0 if cached)
 
 
 @dataclass
@@ -165,6 +193,9 @@ class TrackModel:
         ``coord`` is x [m] for rails and y [m] for sleepers; it is clipped to the body.
         """
         b = self.body(body)
+        if b.solid:   # linear between two retained contact-path nodes: no residual flexibility
+            e, w = b.fom.path_row(coord - b.origin)
+            return PointMap(body, coord, b.gdofs, w @ b.fom.segment_rows(e), 0.0, e, w)
         e, w = b.fom.shape_row(coord - b.origin)
         R = b.residual_blocks.get(e)
         if R is None:  # the 4x4 residual flexibility of this element, computed once
@@ -180,10 +211,14 @@ class TrackModel:
 
         ``u = T q`` plus, for point loads ``[(PointMap, F), ...]`` acting on this body
         (F shape () or (nt,) matching q's leading axis), the static correction of the
-        truncated modes (:func:`track.reduction.static_correction`).
+        truncated modes (:func:`track.reduction.static_correction`). For the solid
+        crossing rail the solid's displacements, shape (..., 3 n_nodes) (its wheel loads
+        act on retained nodes and need no correction).
         """
         b = self.body(body)
         u = np.asarray(q)[..., b.gdofs] @ b.rom.T.T
+        if b.solid:
+            return u
         for pm, F in loads:
             if pm.body != body:
                 continue
@@ -236,12 +271,70 @@ def _reduce_cached(fom: BeamBody, boundary: np.ndarray, f_modes: float, stats: B
 
 
 # --------------------------------------------------------------------------- build
-def _pad_seat_points(seat, kind: str, two_bushings: bool) -> list[tuple[float, float]]:
-    """Lateral positions and stiffness shares of the bushing(s) of one rail seat."""
+def _pad_seat_points(seat, kind: str, two_bushings: bool, solid_offset: float | None = None
+                     ) -> list[tuple[float, float, int]]:
+    """Lateral positions, stiffness shares and bushing index of the bushing(s) of one rail seat.
+
+    ``solid_offset``: the seat is under the solid crossing rail, whose two bushings sit
+    at ``-b, +b`` [m] across the foot (always two).
+    """
+    if solid_offset is not None:
+        return [(seat.y - solid_offset, 0.5, 0), (seat.y + solid_offset, 0.5, 1)]
     if kind == "crossing" and two_bushings:
         half = 0.5 * seat.width
-        return [(seat.y - half, 0.5), (seat.y + half, 0.5)]
-    return [(seat.y, 1.0)]
+        return [(seat.y - half, 0.5, 0), (seat.y + half, 0.5, 1)]
+    return [(seat.y, 1.0, 0)]
+
+
+def _split_crossing(lay: Layout, params: TrackParams):
+    """The layout with the crossing block split into beam / solid / beam parts, and the solid.
+
+    Returns ``(layout, solid)``: the solid part keeps the name ``crossing`` (it carries
+    the nose and the transition); ``crossing_front`` and ``crossing_rear`` are the beam
+    parts of the block ahead of and behind it (left out when empty).
+    """
+    from .solid.crossing import solid_crossing, solid_extent, solid_params
+
+    if lay.x_transition is None:
+        raise ValueError("model: 'solid' (3D crossing rail) needs a turnout layout")
+    blk = lay.rail("crossing")
+    x_a, x_b = solid_extent(lay, lay.params.sleeper_spacing)
+    eps = 1e-6
+
+    def part(name, x0, x1, seats):
+        d = x0 - blk.x_start
+        prof = replace(blk.profile, s=tuple(float(v) - d for v in blk.profile.s))
+        return RailBody(name, "crossing", x0, x1, prof, tuple(seats))
+
+    inner = [st for st in blk.seats if x_a + eps < st.x < x_b - eps]
+    parts = []
+    if x_a - blk.x_start > eps:
+        parts.append(part("crossing_front", blk.x_start, x_a, [st for st in blk.seats if st.x <= x_a + eps]))
+    parts.append(part("crossing", x_a, x_b, inner))
+    if blk.x_end - x_b > eps:
+        parts.append(part("crossing_rear", x_b, blk.x_end, [st for st in blk.seats if st.x >= x_b - eps]))
+    names = [p_.name for p_ in parts]
+    rails = []
+    for r in lay.rails:
+        rails.extend(parts if r.name == "crossing" else [r])
+    first, last = names[0], names[-1]
+    joints = [Joint(j.x, tuple(((first if e == "start" else last), e) if n == "crossing" else (n, e)
+                               for n, e in j.ends)) for j in lay.joints]
+    for a, b in zip(parts[:-1], parts[1:]):
+        joints.append(Joint(a.x_end, ((a.name, "end"), (b.name, "start"))))
+    running = {}
+    for side, segs in lay.running.items():
+        out = []
+        for sg in segs:
+            if sg.body == "crossing":
+                out.extend(RunningSegment(p_.name, max(sg.x0, p_.x_start), min(sg.x1, p_.x_end)) for p_ in parts)
+            else:
+                out.append(sg)
+        running[side] = tuple(out)
+    red = params.reduction
+    sp_ = solid_params(lay, blk.profile, blk.x_start, x_a, x_b, [st.x for st in inner],
+                       red.solid_mesh_size, red.f_cut, red.element_length)
+    return replace(lay, rails=tuple(rails), joints=tuple(joints), running=running), solid_crossing(sp_)
 
 
 def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel:
@@ -257,11 +350,20 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
     -------
     TrackModel
     """
-    if params.model != "beam":
-        raise NotImplementedError(f"track.model = {params.model!r} is not available yet (only 'beam')")
+    if params.model not in ("beam", "solid"):
+        raise ValueError(f"model: must be 'beam' or 'solid', got {params.model!r}")
     stats = BuildStats()
     t0 = time.perf_counter()
     lay = layout if layout is not None else build_layout(params.layout)
+    solid = None
+    if params.model == "solid":
+        lay, solid = _split_crossing(lay, params)
+        if solid.from_cache:
+            stats.cache_hits += 1
+        else:
+            stats.reductions += 1
+            stats.t_solid_mesh, stats.t_solid_reduction = solid.t_mesh, solid.t_reduction
+        t0 = time.perf_counter()
     red = params.reduction
     f_modes = red.mode_factor * red.f_cut
     pad, bal = params.rail_pad, params.ballast
@@ -270,14 +372,21 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
     # rail seats per sleeper: (rail name, y, stiffness share)
     seats_on = [[] for _ in range(n_sl)]
     for r in lay.rails:
+        off = solid.params.bushing_offset if (solid is not None and r.name == "crossing") else None
         for seat in r.seats:
-            for y, share in _pad_seat_points(seat, r.kind, pad.two_bushings):
-                seats_on[seat.sleeper].append((r.name, seat.x, y, share))
+            for y, share, kb in _pad_seat_points(seat, r.kind, pad.two_bushings, off):
+                seats_on[seat.sleeper].append((r.name, seat.x, y, share, kb))
     joint_ends = {(name, end) for j in lay.joints for name, end in j.ends}
 
     # ---- FE bodies and their retained dofs
     specs = []  # (name, kind, origin, x, sleeper, fom, boundary dofs, dof keys)
     for r in lay.rails:
+        if solid is not None and r.name == "crossing":
+            nb = 4                          # q[:4]: (w, theta) of both end couplings, the joint coordinates
+            if not np.array_equal(solid.end_q.ravel(), np.arange(nb)):
+                raise RuntimeError("solid end coordinates are expected first in q")
+            specs.append((r.name, r.kind, r.x_start, np.nan, -1, solid, None, [(r.name, a) for a in range(nb)]))
+            continue
         L = r.x_end - r.x_start
         seat_s = np.array([st.x - r.x_start for st in r.seats])
         fom = beam_body(r.name, mesh_line(L, seat_s, red.element_length), r.profile)
@@ -300,7 +409,7 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
         nb = max(2, int(np.ceil(L / bal.spacing - 1e-9)))
         trib = L / nb
         yb = sl.y_start + trib * (np.arange(nb) + 0.5)
-        ys = np.array([y for _, _, y, _ in seats_on[sl.index]])
+        ys = np.array([y for _, _, y, _, _ in seats_on[sl.index]])
         pts = np.concatenate([ys, yb]) - sl.y_start
         fom = beam_body(f"sleeper_{sl.index}", mesh_line(L, pts, red.element_length), sl.profile)
         nodes = sorted({fom.node(s) for s in pts})
@@ -311,12 +420,14 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
         for y in yb:
             ballast_rows.append((sl.index, name, y, trib, sl.profile.base.width))
         stats.fom_dofs += fom.ndof
-    stats.fom_dofs += sum(sp_[5].ndof for sp_ in specs if sp_[1] != "sleeper")
+    stats.fom_dofs += sum(sp_[5].ndof if sp_[6] is not None else sp_[5].fom_dofs
+                          for sp_ in specs if sp_[1] != "sleeper")
     stats.t_mesh_assembly = time.perf_counter() - t0
 
     # ---- Craig–Bampton per body (cached)
     t1 = time.perf_counter()
-    roms = [_reduce_cached(fom, bd, f_modes, stats) for (_, _, _, _, _, fom, bd, _) in specs]
+    roms = [_reduce_cached(fom, bd, f_modes, stats) if bd is not None else _solid_rom(fom)
+            for (_, _, _, _, _, fom, bd, _) in specs]
     stats.t_reduction = time.perf_counter() - t1
 
     # ---- global numbering (joints share boundary coordinates)
@@ -325,9 +436,12 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
     for j in lay.joints:
         for name, end in j.ends:
             fom = next(s[5] for s in specs if s[0] == name)
-            node = 0 if end == "start" else fom.s.size - 1
             for d in (0, 1):
-                alias[(name, 2 * node + d)] = ("joint", j.x, d)
+                if not isinstance(fom, BeamBody):      # the solid: q positions of its end couplings
+                    key = (name, int(fom.end_q[0 if end == "start" else 1, d]))
+                else:
+                    key = (name, 2 * (0 if end == "start" else fom.s.size - 1) + d)
+                alias[key] = ("joint", j.x, d)
     gid = {}
     n = 0
     bodies = []
@@ -353,6 +467,9 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
         cols.append(c_.ravel())
         kv.append(b.rom.K.ravel())
         mv.append(b.rom.M.ravel())
+        if b.solid:
+            np.add.at(fg, b.gdofs, -GRAVITY * b.fom.weight)
+            continue
         unit = np.zeros(b.fom.ndof)
         unit[0::2] = 1.0
         np.add.at(fg, b.gdofs, -GRAVITY * (b.rom.T.T @ (b.fom.M @ unit)))
@@ -366,9 +483,13 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
     pi, pj, pk, pc, psl, prl, py = [], [], [], [], [], [], []
     for sl in lay.sleepers:
         sb = bodies[index[f"sleeper_{sl.index}"]]
-        for rname, x, y, share in seats_on[sl.index]:
+        for rname, x, y, share, kb in seats_on[sl.index]:
             rb = bodies[index[rname]]
-            i = rb.gdofs[list(rb.rom.boundary).index(2 * rb.fom.node(x - rb.origin))]
+            if rb.solid:
+                seat = int(np.argmin(np.abs(rb.fom.seat_s - (x - rb.origin))))
+                i = rb.gdofs[rb.fom.seat_q[seat, kb]]
+            else:
+                i = rb.gdofs[list(rb.rom.boundary).index(2 * rb.fom.node(x - rb.origin))]
             j = sb.gdofs[list(sb.rom.boundary).index(2 * sb.fom.node(y - sb.origin))]
             scale = pad.stiffness_scale * overrides.get(sl.index, 1.0)
             pi.append(i); pj.append(j); psl.append(sl.index); prl.append(rname); py.append(y)
@@ -397,6 +518,12 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
     stats.bodies = len(bodies)
     return TrackModel(params=params, layout=lay, bodies=bodies, n=n, M=M.tocsr(), K=K.tocsr(),
                       C=C.tocsr(), f_gravity=fg, pads=pads, ballast=ballast, stats=stats, _index=index)
+
+
+def _solid_rom(sc) -> ReducedBody:
+    """The solid crossing body's reduced matrices as a :class:`ReducedBody` (``T``: solid dofs)."""
+    nm = sc.mode_freqs.size
+    return ReducedBody(K=sc.K, M=sc.M, T=sc.T, boundary=np.arange(sc.nr - nm), mode_freqs=sc.mode_freqs)
 
 
 def _spring_matrix(i: np.ndarray, j: np.ndarray, k: np.ndarray, n: int) -> sp.csr_matrix:

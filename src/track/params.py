@@ -236,12 +236,16 @@ class ReductionParams:
         Fixed-interface modes are kept up to ``mode_factor * f_cut`` (3: the
         smallest factor of 2, 2.5, 3 that met the 1 % bound on the assembled crossing panel).
     element_length : float
-        Maximum FE element length for rails and sleepers [m].
+        Maximum FE element length for rails and sleepers [m] (also the spacing of
+        the output stations along the solid crossing rail).
+    solid_mesh_size : float
+        Mesh size of the solid crossing rail (``model: solid``), gmsh ``MeshSizeMax`` [m].
     """
 
     f_cut: float = 1500.0
     mode_factor: float = 3.0
     element_length: float = 0.1
+    solid_mesh_size: float = 0.06
 
 
 @dataclass(frozen=True)

@@ -41,6 +41,12 @@ def body_response(model: TrackModel, body: str, q: np.ndarray, loads=()) -> Body
     without which the moment under a wheel between two seats is clearly low.
     """
     b = model.body(body)
+    if b.solid:
+        # the solid crossing rail: at its output stations, the section deflection (area mean of
+        # u_z, as the distributing coupling defines it) and the section moment from the internal
+        # forces (track.solid.crossing); its wheel loads act on retained nodes (no correction)
+        qb = np.asarray(q)[..., b.gdofs]
+        return BodyResponse(coord=b.coords(), w=qb @ b.fom.W.T, moment=qb @ b.fom.Mom.T)
     u = model.full_field(body, q, loads)
     return BodyResponse(coord=b.coords(), w=u[..., 0::2], moment=b.fom.nodal_moments(u))
 
@@ -72,3 +78,69 @@ def displacement(model: TrackModel, body: str, coord: float, q: np.ndarray) -> n
     """Vertical displacement [m] at a point (track coordinate x or y) for state(s) q."""
     pm = model.point(body, coord)
     return np.asarray(q)[..., pm.gidx] @ pm.weights
+
+
+def strain(model: TrackModel, body: str, coord: float, z: float, q: np.ndarray,
+           gauge_length: float = 0.1) -> np.ndarray:
+    """Longitudinal engineering strain of a gauge on a body, for state(s) ``q``.
+
+    The gauge of length ``L = gauge_length`` is centred at ``coord`` along the body,
+    at height ``z`` above the body's neutral axis (positive up). Its strain is the
+    change of its length over ``L`` (seed 000 eq. 1, read as ``eps = u / L``; the
+    printed ``(L + u) / L`` is the stretch):
+
+    * beam bodies (rails along x, sleepers along y): the section rotations ``theta``
+      (= dw/ds in the Euler-Bernoulli limit) at both gauge ends, from the recovered
+      full field, give ``eps = -z (theta(c + L/2) - theta(c - L/2)) / L``, which is
+      ``-z M / (E I)`` for a constant moment M (sagging +);
+    * the solid crossing rail: the axial displacements of the two surface points at
+      that height (on the +y side of the section, centroid height as neutral axis),
+      ``eps = (u_x(c + L/2) - u_x(c - L/2)) / L``.
+
+    Parameters
+    ----------
+    model : TrackModel
+    body : str
+    coord : float
+        Gauge centre: x for rails, y for sleepers [m].
+    z : float
+        Height of the gauge above the neutral axis [m].
+    q : ndarray, shape (n,) or (nt, n)
+        Generalized displacements.
+    gauge_length : float
+        [m], > 0; the gauge must lie on the body.
+
+    Returns
+    -------
+    ndarray, shape () or (nt,)
+        Strain [-], tension +.
+    """
+    return np.asarray(q) @ strain_row(model, body, coord, z, gauge_length)
+
+
+def strain_row(model: TrackModel, body: str, coord: float, z: float, gauge_length: float = 0.1) -> np.ndarray:
+    """The gauge of :func:`strain` as a row on the generalized coordinates, shape (n,).
+
+    ``strain(model, body, coord, z, q) == q @ strain_row(model, body, coord, z)``; the
+    virtual strain gauges (:mod:`track.sensors`) use the row directly.
+    """
+    b = model.body(body)
+    L = float(gauge_length)
+    c = np.asarray(b.coords())
+    if not L > 0.0:
+        raise ValueError(f"gauge_length: must be > 0, got {gauge_length!r}")
+    lo, hi = coord - 0.5 * L, coord + 0.5 * L
+    s0, s1 = (b.origin + b.fom.contact_s[[0, -1]]) if b.solid else (c[0], c[-1])
+    if lo < s0 - 1e-9 or hi > s1 + 1e-9:
+        raise ValueError(f"gauge {lo:.3f}..{hi:.3f} m is not on {body} ({s0:.3f}..{s1:.3f} m)")
+    row = np.zeros(model.n)
+    if b.solid:
+        R = b.fom.axial_rows(np.array([lo, hi]) - b.origin, z)          # (2, nr)
+        row[b.gdofs] = (R[1] - R[0]) / L
+        return row
+    th = []
+    for s in (lo, hi):
+        e, N = b.fom.rotation_row(b.local(s))
+        th.append(N @ b.rom.T[2 * e:2 * e + 4, :])
+    row[b.gdofs] = -z * (th[1] - th[0]) / L
+    return row

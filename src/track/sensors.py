@@ -19,9 +19,10 @@ type              reading                                                       
                   acceleration, and differs by up to 20 % of the signal)
 ``strain``        engineering longitudinal strain of a gauge of length          -
                   ``gauge_length`` centred at ``coord``, at height ``z`` above
-                  the body's neutral axis: eps = -z (theta(c + L/2) -
-                  theta(c - L/2)) / L, theta the section rotation (seed 000
-                  eq. 1 with its typo fixed: strain = elongation / L)
+                  the body's neutral axis (:func:`track.post.strain_row`: beams
+                  from the section rotations at the gauge ends, the solid
+                  crossing rail from the axial displacements of two surface
+                  points; seed 000 eq. 1 with its typo fixed: strain = u / L)
 ================  ============================================================  ========
 
 Signs: displacement and acceleration up +, pressure compressive +, strain tensile +.
@@ -37,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import TrackModel
+from .post import strain_row
 
 SENSOR_TYPES = ("pressure", "displacement", "acceleration", "strain")
 GAUGE_LENGTH = 0.1   # m: default strain-gauge base (a 100 mm gauge; also the beam element length)
@@ -98,28 +100,6 @@ class CompiledSensors:
     @property
     def ids(self) -> list[str]:
         return [s.id for s in self.sensors]
-
-
-def _rotation_row(model: TrackModel, body: str, coord: float) -> np.ndarray:
-    """Section rotation at ``coord`` on a beam body as a row on q (linear between nodes)."""
-    b = model.body(body)
-    s = np.clip(b.local(coord), b.fom.s[0], b.fom.s[-1])
-    i = int(np.clip(np.searchsorted(b.fom.s, s) - 1, 0, b.fom.s.size - 2))
-    xi = (s - b.fom.s[i]) / (b.fom.s[i + 1] - b.fom.s[i])
-    row = np.zeros(model.n)
-    row[b.gdofs] = (1.0 - xi) * b.rom.T[2 * i + 1] + xi * b.rom.T[2 * i + 3]
-    return row
-
-
-def strain_row(model: TrackModel, body: str, coord: float, z: float, gauge_length: float = GAUGE_LENGTH) -> np.ndarray:
-    """Engineering strain of a gauge on a beam body as a row on q, shape (n,).
-
-    eps = -z (theta(c + L/2) - theta(c - L/2)) / L: the elongation of the fibre at
-    height ``z`` between the gauge's ends divided by its length. In pure bending it
-    equals -z M / (EI) exactly (theta is linear there).
-    """
-    half = 0.5 * gauge_length
-    return -z * (_rotation_row(model, body, coord + half) - _rotation_row(model, body, coord - half)) / gauge_length
 
 
 def displacement_row(model: TrackModel, body: str, coord: float) -> np.ndarray:
@@ -270,5 +250,5 @@ def displacement_from_acceleration(acc: np.ndarray, dt: float, f_c: float = RECO
     return np.fft.irfft(X, n=n)
 
 
-__all__ = ["Sensor", "SENSOR_TYPES", "CompiledSensors", "compile_sensors", "sensor_signals", "strain_row",
+__all__ = ["Sensor", "SENSOR_TYPES", "CompiledSensors", "compile_sensors", "sensor_signals",
            "displacement_row", "pressure_weights", "displacement_from_acceleration"]

@@ -9,7 +9,11 @@ the reduced body are
   rail's end node; the other four motions of the end surface (axial, lateral,
   torsion, yaw) are held at zero, as the vertical-plane beam model does for
   the rails (without this the solid would have free rigid motions that no
-  bushing restrains);
+  bushing restrains). With ``axial_free_end`` the axial motion of the end
+  surface at ``x = length`` is left free: the solid is then axially
+  determinate, as the beams (which have no axial dof) are; holding both ends
+  made a bending solid with a varying centroid height (the trimmed nose) arch
+  between them, with an axial strain the beam model does not have;
 * per rail seat two bushing nodes on the foot bottom at ``y = -b, +b``
   (vertical dof ``u_z``), for the two-bushing wide seat of the seed's 3D model;
 * the vertical dofs of the nodes on the contact path (a longitudinal line on
@@ -65,6 +69,15 @@ class SolidRailParams:
         Fixed-interface modes kept up to this frequency [Hz]; 4 x the model
         cut-off keeps the reduced frequencies below the cut-off within 1 %
         (3 x was not enough for the solid, see tests/test_solid.py).
+    axial_free_end : bool
+        Leave the axial motion of the end surface at ``x = length`` free (see the
+        module docstring); False holds it as at ``x = 0``.
+    stations : tuple of float
+        Further axial positions with a full cross-section plane of nodes [m]
+        (sections where moments and section deflections are recovered).
+    material : tuple or None
+        ``(x, s_E, s_rho)``, three equal-length tuples: factors on ``E`` and
+        ``rho`` tabulated along the solid, linear in between (``None``: 1).
     """
 
     length: float
@@ -78,6 +91,16 @@ class SolidRailParams:
     nu: float = RAIL_60E1.E / (2.0 * RAIL_60E1.G) - 1.0
     rho: float = RAIL_60E1.rho
     f_modes: float = 6000.0
+    stations: tuple = ()
+    material: tuple | None = None
+    axial_free_end: bool = False
+
+    def scale(self, x: np.ndarray) -> tuple:
+        """Factors ``(s_E, s_rho)`` on ``E`` and ``rho`` at axial positions ``x`` [m]."""
+        if self.material is None:
+            return 1.0, 1.0
+        xs, sE, sr = (np.asarray(v, dtype=float) for v in self.material)
+        return np.interp(x, xs, sE), np.interp(x, xs, sr)
 
 
 @dataclass
@@ -135,8 +158,9 @@ def solid_rail(p: SolidRailParams) -> SolidRail:
     section = p.section if p.section is not None else rail_60e1_like()
     b, top = p.bushing_offset, section.top
     section = section.with_points([[-b, 0.0], [b, 0.0], [p.contact_y, top]])
-    points, tets = rail_solid_mesh(p.length, section, p.h, stations=p.seats, crossing=p.crossing)
-    K, M = assemble(points, tets, p.E, p.nu, p.rho)
+    points, tets = rail_solid_mesh(p.length, section, p.h, stations=tuple(p.seats) + tuple(p.stations),
+                                   crossing=p.crossing)
+    K, M = assemble(points, tets, p.E, p.nu, p.rho, scale=None if p.material is None else p.scale)
 
     seat_nodes_ = np.array([[_one(seat_nodes(points, x, 0.0, y)) for y in (-b, b)] for x in p.seats],
                            dtype=np.int64).reshape(-1, 2)
@@ -146,7 +170,8 @@ def solid_rail(p: SolidRailParams) -> SolidRail:
     full = tie(K, M, ends, components=END_COMPONENTS, keep=retained_solid)
 
     # hold the end components that no beam dof carries
-    held = np.concatenate([r[[END_COMPONENTS.index(c) for c in END_HELD]] for r in full.ref_dofs])
+    held_at = [END_HELD, tuple(c for c in END_HELD if not (p.axial_free_end and c == "ux"))]
+    held = np.concatenate([r[[END_COMPONENTS.index(c) for c in h]] for r, h in zip(full.ref_dofs, held_at)])
     keep = np.setdiff1d(np.arange(full.K.shape[0]), held)
     new_of = np.full(full.K.shape[0], -1, dtype=np.int64)
     new_of[keep] = np.arange(keep.size)

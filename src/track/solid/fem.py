@@ -62,7 +62,7 @@ def _basis(points: np.ndarray, tets: np.ndarray, intorder: int):
 
 
 def assemble(points: np.ndarray, tets: np.ndarray, E: float, nu: float,
-             rho: float) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+             rho: float, scale=None) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """Stiffness and consistent mass of an isotropic linear-elastic solid.
 
     Quadratic Lagrange tetrahedra (``ElementVector(ElementTetP2)``) on straight-sided
@@ -81,6 +81,14 @@ def assemble(points: np.ndarray, tets: np.ndarray, E: float, nu: float,
         Poisson's ratio [-].
     rho : float
         Density [kg/m^3].
+    scale : callable, optional
+        ``scale(x) -> (s_E, s_rho)``: factors on ``E`` and ``rho`` as functions of
+        the axial coordinate ``x`` [m] (arrays of the shape of ``x``), evaluated at
+        the quadrature points; ``None``: homogeneous. Used to give the solid the
+        bending stiffness and mass of a body it stands for (the crossing block,
+        :mod:`track.solid.crossing`). With a non-constant factor the quadrature is
+        no longer exact; the factors used are piecewise linear and smooth on the
+        element scale.
 
     Returns
     -------
@@ -88,19 +96,68 @@ def assemble(points: np.ndarray, tets: np.ndarray, E: float, nu: float,
         [N/m] and [kg], dof ``3 i + c`` = component ``c`` of node ``i``.
     """
     import skfem
-    from skfem.helpers import dot
-    from skfem.models.elasticity import linear_elasticity
+    from skfem.helpers import ddot, dot, sym_grad, trace
 
     basis, P = _basis(points, tets, intorder=2)
     lam, mu = lame(E, nu)
-    K = skfem.asm(linear_elasticity(lam, mu), basis)
+
+    def s_E(x):
+        return 1.0 if scale is None else scale(x[0])[0]
+
+    def s_rho(x):
+        return 1.0 if scale is None else scale(x[0])[1]
+
+    @skfem.BilinearForm
+    def elasticity(u, v, w):
+        eu, ev = sym_grad(u), sym_grad(v)
+        return s_E(w.x) * (2.0 * mu * ddot(eu, ev) + lam * trace(eu) * trace(ev))
+
+    K = skfem.asm(elasticity, basis)
 
     @skfem.BilinearForm
     def mass(u, v, w):
-        return rho * dot(u, v)
+        return rho * s_rho(w.x) * dot(u, v)
 
     M = skfem.asm(mass, skfem.Basis(basis.mesh, basis.elem, intorder=4))   # same dof numbering
     return (P @ K @ P.T).tocsr(), (P @ M @ P.T).tocsr()
+
+
+def probe_matrix(points: np.ndarray, tets: np.ndarray, X: np.ndarray) -> sp.csr_matrix:
+    """Interpolation of a nodal field at arbitrary points inside the mesh.
+
+    Uses the quadratic shape functions (``skfem.CellBasis.probes`` of a scalar
+    ``ElementTetP2`` basis) and maps scikit-fem's dof order to our node order as
+    :func:`assemble` does.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Node coordinates [m].
+    tets : ndarray of int, shape (m, 10)
+    X : ndarray, shape (k, 3)
+        Points [m]; each must lie in (or on the boundary of) an element.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (k, n)
+        ``f(X) = P @ f_nodes`` for a scalar nodal field (e.g. ``u[0::3]``).
+    """
+    import skfem
+
+    points = np.asarray(points, dtype=float)
+    tets = np.asarray(tets)
+    corners = np.unique(tets[:, :4])
+    renum = np.full(points.shape[0], -1, dtype=np.int64)
+    renum[corners] = np.arange(corners.size)
+    mesh = skfem.MeshTet1(points[corners].T.copy(), renum[tets[:, :4]].T.astype(np.int32).copy())
+    basis = skfem.Basis(mesh, skfem.ElementTetP2())
+    node_of_edge = np.empty(mesh.edges.shape[1], dtype=np.int64)
+    node_of_edge[mesh.t2e.ravel()] = tets[:, 4:].T.ravel()
+    node_of = np.empty(basis.N, dtype=np.int64)                  # skfem dof -> our node
+    node_of[basis.nodal_dofs[0]] = corners
+    node_of[basis.edge_dofs[0]] = node_of_edge
+    Pk = basis.probes(np.asarray(X, dtype=float).T).tocoo()
+    return sp.csr_matrix((Pk.data, (Pk.row, node_of[Pk.col])), shape=(Pk.shape[0], points.shape[0]))
 
 
 def assemble_load(points: np.ndarray, tets: np.ndarray, f, intorder: int = 6) -> np.ndarray:
@@ -332,6 +389,6 @@ def strain_energy(K: sp.spmatrix, u: np.ndarray) -> float:
     return 0.5 * float(u @ (K @ u))
 
 
-__all__ = ["assemble", "assemble_load", "boundary_nodes", "lame", "nodes_on_plane", "nodes_on_line", "nearest_node", "seat_nodes",
+__all__ = ["assemble", "assemble_load", "probe_matrix", "boundary_nodes", "lame", "nodes_on_plane", "nodes_on_line", "nearest_node", "seat_nodes",
            "faces_on_plane", "SurfaceMoments",
            "surface_moments", "body_force", "strain_energy", "TET_EDGES"]
