@@ -14,6 +14,7 @@ share one module.  So each FMU bundles its code as one package with a unique nam
                                   /<module>.py  copy of the slave module, e.g. vehicle_fmus.py
                                   /<package>/   copy of src/<package>, e.g. vehicle/
     resources/<data files>                      e.g. track_fmu.json: the baked track parameters
+                                                and sensors
     resources/pythonfmu/                        added by pythonfmu
     binaries/linux64/<ClassName>.so             pythonfmu's C wrapper
 
@@ -35,7 +36,7 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, Mapping, Optional, Tuple
+from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Tuple
 
 FMUS_DIR = Path(__file__).resolve().parent
 SRC_DIR = FMUS_DIR.parent / "src"
@@ -75,7 +76,8 @@ globals().setdefault("_namespace_refs", []).append(globals())  # see fmus.build.
 from {package}.{module} import {class_name}
 '''
 
-TRACK_DEFAULT_WHEELS = 4  # build_fmu("track"): default track, wheels of the default vehicle (bogie)
+TRACK_DEFAULT_WHEELS = 4  # build_fmu("track"): default track, wheels of the default vehicle (bogie);
+                          # no sensors (resolving a layout needs orchestrator.sensor_layout: build_job)
 
 
 def _default_track_resources() -> Dict[str, bytes]:
@@ -150,7 +152,7 @@ def build_fmu(kind: str, out_dir: str | Path) -> Path:
 
 
 def build_track_fmu(track_params, n_wheels: int, out_dir: str | Path, name: str = "track",
-                    **defaults: Any) -> Path:
+                    sensors: Sequence[Any] = (), **defaults: Any) -> Path:
     """Build a track FMU with ``track_params`` baked in, as ``out_dir/<name>.fmu``.
 
     Parameters
@@ -164,6 +166,10 @@ def build_track_fmu(track_params, n_wheels: int, out_dir: str | Path, name: str 
         Destination directory (created if missing).
     name : str
         File name of the FMU without ``.fmu``.
+    sensors : sequence of track.sensors.Sensor
+        Sensors resolved on a model of ``track_params`` (``orchestrator.sensor_layout.resolve``;
+        ``orchestrator.build_job`` does it for a scenario), baked into the same resource
+        file: one output per sensor (``fmus.track_fmu``).  Empty: no sensor outputs.
     **defaults
         Start values of the run parameters: ``speed`` [m/s], ``static_wheel_load``
         [N], ``extrapolate``, ``auto_offset`` (bool), ``record_every`` (int); see
@@ -176,7 +182,7 @@ def build_track_fmu(track_params, n_wheels: int, out_dir: str | Path, name: str 
     """
     from .track_fmu import RESOURCE_FILE, resource_payload
 
-    payload = resource_payload(track_params, n_wheels, **defaults)
+    payload = resource_payload(track_params, n_wheels, sensors, **defaults)
     return _build("track", Path(out_dir) / f"{name}.fmu", {RESOURCE_FILE: payload})
 
 

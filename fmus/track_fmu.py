@@ -2,9 +2,10 @@
 
 The scenario's ``track:`` section is baked into the FMU at build time as
 ``resources/track_fmu.json`` (:func:`resource_payload`, written by
-``fmus.build.build_track_fmu``), together with the number of wheels and the
-defaults of the run parameters.  The slave reads it from its resources folder
-(``self.resources``, which pythonfmu passes to every instance: the FMU's
+``fmus.build.build_track_fmu``), together with the number of wheels, the
+defaults of the run parameters and the resolved sensors (optional key ``sensors``).
+The slave reads it from its resources folder (``self.resources``, which
+pythonfmu passes to every instance: the FMU's
 ``resources/`` at run time, the staging folder at build time), so the variable
 list, their start values and the model all come from one file.
 
@@ -21,6 +22,10 @@ front wheelset left, right, then the next:
           ``wheel{i}_Fz_rail`` [N]  part carried by the running / wing rail
           ``wheel{i}_Fz_nose`` [N]  part carried by the crossing nose
           ``wheel{i}_rail_z`` [m]   rail deflection under the wheel, upward + (0 until the first step)
+* outputs, one per sensor of the baked sensor layout (DESIGN §4.3, §4.4; see "Sensor
+  outputs" below), named by the sensor id: ``<id>`` in Pa (pressure), m/s2
+  (acceleration), - (strain) or m (displacement), and for each displacement sensor
+  also ``<id>_acc`` [m/s2], the signal of its accelerometer
 * parameters, variability "fixed" (read at exitInitializationMode, where the model
   is rebuilt from the baked parameters with these overrides; ``track.model``'s
   in-process cache of reduced bodies makes a second instance or a re-init cheap):
@@ -43,6 +48,25 @@ until an FMU state is restored) gives fmi2Discard with the message
 (``fmus.base``).  The FMU state holds the ``TrackCosim`` state, its step and the
 lazy-construction flag; recorded samples are not part of it (a restore truncates
 the record to the restored length).
+
+Sensor outputs: the sensors are resolved on the scenario's track at build time
+(``orchestrator.build_job``: the scenario's ``sensors:`` layout or the default one,
+``orchestrator.sensor_layout.resolve``) and baked into ``track_fmu.json`` as a list of
+``track.sensors.Sensor`` (body name, coordinate, ...), so the FMU reads no layout file at
+run time.  Their rows (``track.sensors.compile_sensors``) are compiled on the model
+whenever it is (re)built, since h1, h2, voids, ... change the ballast bushings but not the
+bodies a sensor sits on.  A sensor output is the value at the current state, 0 until
+the first step (as ``wheel{i}_rail_z``): pressure from the ballast bushings' pressures
+under the sensor (``model.ballast.pressure``), acceleration and strain from the rows on
+the accelerations and the displacements.  A displacement sensor outputs the displacement
+itself (its ``displacement_row`` on q): the field team reconstructs displacements from
+the accelerometer with a zero-phase high-pass (``track.sensors.displacement_from_acceleration``),
+which no causal FMU can apply; the offline pipeline (``orchestrator.sensing``, from the
+recorded states) applies it to the accelerometer signal over the whole record, and a host
+of this FMU can do the same with the output ``<id>_acc``.  The
+values are computed from the rows restricted to their non-zero columns (:class:`SensorReader`:
+three gathers and one matrix-vector product), when an output is first read after a step
+(a run that reads no sensor pays nothing for them).
 """
 from __future__ import annotations
 
@@ -50,7 +74,7 @@ import dataclasses
 import json
 import math
 from pathlib import Path
-from typing import Any, Dict
+from typing import Any, Dict, Sequence
 
 import numpy as np
 from pythonfmu.default_experiment import DefaultExperiment
@@ -60,12 +84,15 @@ from pythonfmu.variables import Integer, Real, String
 from .base import UNITS, CosimSlave
 
 try:  # inside a built FMU the model package is bundled next to this module
-    from .track import cosim as _cosim, model as _model, params as _params
+    from .track import ballast as _ballast, cosim as _cosim, model as _model, params as _params
+    from .track import sensors as _sensors
 except ImportError:  # source tree: src/ on sys.path
-    from track import cosim as _cosim, model as _model, params as _params
+    from track import ballast as _ballast, cosim as _cosim, model as _model, params as _params
+    from track import sensors as _sensors
 
-# ballast bed stiffness is given per metre of sleeper: N/m per m (fmus.base's unit registry)
+# ballast bed stiffness is given per metre of sleeper: N/m per m; accelerations (fmus.base's unit registry)
 UNITS.setdefault("N/m2", {"kg": 1, "m": -1, "s": -2})
+UNITS.setdefault("m/s2", {"m": 1, "s": -2})
 
 RESOURCE_FILE = "track_fmu.json"   # in the FMU's resources folder
 RESOURCE_FORMAT = "xpanel-track-fmu/1"
@@ -73,11 +100,14 @@ N_VOID_GAPS = 6                    # gaps at 6 equidistant points along a sleepe
 STEP_RTOL = 1e-9                   # step sizes closer than this (relative) count as equal: libcosim
                                    # converts its integer-ns clock and hands over h(1 + 1e-12)
 SIDE = ("left", "right")
+SENSOR_UNITS = {"pressure": "Pa", "acceleration": "m/s2", "strain": "-", "displacement": "m"}
+ACCELEROMETER_SUFFIX = "_acc"      # <id>_acc: the accelerometer signal of displacement sensor <id>
 RUN_DEFAULTS = {"speed": 33.333, "static_wheel_load": 98100.0, "extrapolate": True,
                 "auto_offset": True, "record_every": 0, "extrapolate_force": True}   # DESIGN §4.2 example: 120 km/h, 20 t axle
 
 
-def resource_payload(params: "_params.TrackParams", n_wheels: int, **defaults: Any) -> bytes:
+def resource_payload(params: "_params.TrackParams", n_wheels: int, sensors: Sequence["_sensors.Sensor"] = (),
+                     **defaults: Any) -> bytes:
     """The baked resource file of a track FMU (JSON).
 
     Parameters
@@ -86,6 +116,9 @@ def resource_payload(params: "_params.TrackParams", n_wheels: int, **defaults: A
         The scenario's track section.
     n_wheels : int
         Number of wheels (bogie 4, quarter vehicle 2).
+    sensors : sequence of track.sensors.Sensor
+        The sensors, resolved on a model of ``params`` (``orchestrator.sensor_layout.resolve``);
+        one output each (see the module docstring).  Empty: no sensor outputs.
     **defaults
         Defaults of the run parameters, keys of :data:`RUN_DEFAULTS`: ``speed`` [m/s],
         ``static_wheel_load`` [N], ``extrapolate``, ``auto_offset`` (bool),
@@ -100,9 +133,17 @@ def resource_payload(params: "_params.TrackParams", n_wheels: int, **defaults: A
         raise TypeError(f"unknown track FMU default(s) {sorted(unknown)}; known: {sorted(RUN_DEFAULTS)}")
     if int(n_wheels) < 1:
         raise ValueError(f"n_wheels = {n_wheels!r} must be >= 1")
+    sensors = tuple(sensors)
+    ids = [s.id for s in sensors]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"sensor ids must be unique, got {ids}")
+    bad = [f"{s.id}: {s.type!r}" for s in sensors if s.type not in SENSOR_UNITS]
+    if bad:
+        raise ValueError(f"unknown sensor type(s) {bad}; known: {sorted(SENSOR_UNITS)}")
     values = dict(RUN_DEFAULTS, **defaults)
     payload = {"format": RESOURCE_FORMAT, "n_wheels": int(n_wheels),
                "track": dataclasses.asdict(params),
+               "sensors": [dataclasses.asdict(s) for s in sensors],
                "defaults": {"speed": float(values["speed"]),
                             "static_wheel_load": float(values["static_wheel_load"]),
                             "extrapolate": bool(values["extrapolate"]),
@@ -114,6 +155,73 @@ def resource_payload(params: "_params.TrackParams", n_wheels: int, **defaults: A
 
 class StepSizeError(ValueError):
     """A communication step differs from the first one (the track FMU is fixed-step)."""
+
+
+class SensorReader:
+    """Values of the sensor outputs at one track state, a few small products per call.
+
+    The rows of ``track.sensors.compile_sensors`` span all n generalized coordinates
+    (1741 on the 40-sleeper turnout) but touch few of them (a point on a Craig-Bampton
+    body reads its boundary and modal coordinates: about 200 for the default layout's
+    20 sensors).  They are restricted once to their non-zero columns and stacked, so a
+    reading gathers those entries of q and a, evaluates the bushings under the pressure
+    cells only, and does one (ns_out, n_used) matrix-vector product, the arithmetic of
+    ``track.sensors.sensor_signals`` at one time (up to the order of summation).
+
+    Output rows, in this order: one per sensor (pressure: bushing pressures; acceleration:
+    row on a; strain: row on q; displacement: ``track.sensors.displacement_row`` on q,
+    see the module docstring), then one per displacement sensor, its accelerometer (the
+    same point's row on a).
+
+    Parameters
+    ----------
+    model : TrackModel
+    sensors : sequence of track.sensors.Sensor
+
+    Raises
+    ------
+    ValueError
+        From ``compile_sensors``: a sensor on a body the model does not have, ...
+    """
+
+    def __init__(self, model: "_model.TrackModel", sensors: Sequence["_sensors.Sensor"]):
+        compiled = _sensors.compile_sensors(model, sensors)
+        self.sensors = compiled.sensors
+        disp = [i for i, s in enumerate(self.sensors) if s.type == "displacement"]
+        Cq = compiled.Cq.copy()
+        Ca = np.vstack([compiled.Ca, compiled.Ca[disp]])   # accelerometer rows of the displacement sensors
+        for i in disp:   # the displacement itself, not its accelerometer
+            s = self.sensors[i]
+            Cq[i] = _sensors.displacement_row(model, s.body, s.coord)
+            Ca[i] = 0.0
+        n_out = len(self.sensors) + len(disp)
+        Cq = np.vstack([Cq, np.zeros((len(disp), model.n))])
+        Pb = np.vstack([compiled.Pb, np.zeros((len(disp), compiled.Pb.shape[1]))])
+        self.cols_q = np.flatnonzero(np.any(Cq != 0.0, axis=0))
+        self.cols_a = np.flatnonzero(np.any(Ca != 0.0, axis=0))
+        used = np.flatnonzero(np.any(Pb != 0.0, axis=0))
+        bal = model.ballast   # the bushings under the pressure cells (arrays all of length nb)
+        self.ballast = _ballast.Ballast(**{f.name: getattr(bal, f.name)[used] for f in dataclasses.fields(bal)})
+        self.C = np.ascontiguousarray(np.hstack([Cq[:, self.cols_q], Ca[:, self.cols_a], Pb[:, used]]))
+        self._nq, self._na = self.cols_q.size, self.cols_a.size
+        self._x = np.empty(self.C.shape[1])   # gathered q, a entries and bushing pressures
+        self.values = np.zeros(n_out)
+
+    def read(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Sensor values at the state (q [m], v [m/s], a [m/s2], shape (n,)).
+
+        Returns
+        -------
+        ndarray, shape (n_out,)
+            SI units; a view of a buffer that the next call overwrites.
+        """
+        x, nq, na = self._x, self._nq, self._na
+        np.take(q, self.cols_q, out=x[:nq], mode="clip")   # clip: unbuffered; indices are valid
+        np.take(a, self.cols_a, out=x[nq:nq + na], mode="clip")
+        D = self.ballast.dof
+        x[nq + na:] = self.ballast.pressure(q[D], v[D])
+        np.dot(self.C, x, out=self.values)
+        return self.values
 
 
 class Track(CosimSlave):
@@ -133,6 +241,7 @@ class Track(CosimSlave):
         if baked.get("format") != RESOURCE_FORMAT:
             raise ValueError(f"{RESOURCE_FILE}: format {baked.get('format')!r}, expected {RESOURCE_FORMAT!r}")
         self._baked = _params.track_params_from_dict(baked["track"])
+        self._sensors = tuple(_sensors.Sensor(**d) for d in baked.get("sensors", ()))
         n = self._n = int(baked["n_wheels"])
         p = self._baked
         voids = p.ballast.voids
@@ -150,6 +259,8 @@ class Track(CosimSlave):
         self._built = None        # the TrackParams it was built from
         self._cosim = None        # TrackCosim, built at the first doStep (needs the step)
         self._t_first = None      # time of the first doStep [s] (TrackCosim's time 0)
+        self._reader = None       # SensorReader of the model, built with it
+        self._sensor_values = None  # its values at the current state; None: not read since the last step
 
         self.add_parameter("speed", "vehicle speed along increasing x, to extrapolate wheel_x over a "
                            "step and to start the static state", "m/s", *self._accessors("speed"))
@@ -218,6 +329,7 @@ class Track(CosimSlave):
                             "crossing nose", "N", lambda i=i: self._output("nose", i))
             self.add_output(f"wheel{i + 1}_rail_z", f"rail deflection under wheel {i + 1} ({label}), "
                             "upward +; 0 until the first step", "m", lambda i=i: self._output("rail_z", i))
+        self._add_sensor_outputs()
 
     # ------------------------------------------------------------- registration
     def _add_integer(self, name: str, description: str) -> None:
@@ -234,6 +346,46 @@ class Track(CosimSlave):
                             initial=Fmi2Initial.approx, description=self._describe(description, unit),
                             getter=getter), unit)
         self._initial_dependencies[name] = tuple(depends_on)
+
+    def _add_sensor_outputs(self) -> None:
+        """One output per baked sensor, then ``<id>_acc`` per displacement sensor (SensorReader's order)."""
+        names = {v.name for v in self.vars.values()}
+        outputs = [(s.id, s, SENSOR_UNITS[s.type]) for s in self._sensors]
+        outputs += [(s.id + ACCELEROMETER_SUFFIX, s, "m/s2") for s in self._sensors if s.type == "displacement"]
+        for j, (name, s, unit) in enumerate(outputs):
+            if name in names:
+                raise ValueError(f"sensor output {name!r} clashes with another variable of the track FMU")
+            names.add(name)
+            self.add_output(name, self._sensor_description(s, unit), unit, lambda j=j: self._sensor_output(j))
+
+    @staticmethod
+    def _sensor_description(s: "_sensors.Sensor", unit: str) -> str:
+        coord = "y" if s.body.startswith("sleeper_") else "x"   # Sensor.coord: y on sleepers, x on rails
+        where = f"on {s.body} at {coord} = {s.coord:.4f} m"
+        if s.type == "pressure":
+            text = f"sleeper-ballast contact pressure under {s.body} at y = {s.coord:.4f} m, compressive +"
+        elif s.type == "strain":
+            text = (f"longitudinal strain of a {s.gauge_length:g} m gauge {where}, {s.z:g} m above the "
+                    "neutral axis, tensile +")
+        elif s.type == "acceleration":
+            text = f"vertical acceleration {where}, upward +"
+        elif unit == "m":
+            text = (f"vertical displacement {where}, upward +; the displacement itself: the measurement's "
+                    f"reconstruction from the accelerometer ({s.id}{ACCELEROMETER_SUFFIX}, a zero-phase "
+                    "high-pass) is not causal and is applied offline")
+        else:
+            text = (f"vertical acceleration of the accelerometer of displacement sensor {s.id} {where}, "
+                    "upward +; reconstruct the displacement from it offline as for the measurement")
+        return f"sensor {s.id} (group {s.group}, {s.type}): {text}; 0 until the first step"
+
+    def _sensor_output(self, j: int) -> float:
+        c = self._cosim
+        if c is None or c.integ is None:
+            return 0.0
+        if self._sensor_values is None:   # first read since the state changed
+            i = c.integ
+            self._sensor_values = self._reader.read(i.q, i.v, i.a)
+        return float(self._sensor_values[j])
 
     @staticmethod
     def _label(i: int) -> str:
@@ -313,6 +465,8 @@ class Track(CosimSlave):
         if self._model is None or params != self._built:
             self._model = _model.build_track(params)
             self._built = params
+            self._reader = SensorReader(self._model, self._sensors) if self._sensors else None
+        self._sensor_values = None
 
     def _new_cosim(self, h: float) -> "_cosim.TrackCosim":
         v = self._values
@@ -338,6 +492,7 @@ class Track(CosimSlave):
         elif abs(step_size - c.h) > STEP_RTOL * c.h:
             raise StepSizeError(f"the track FMU runs with a fixed communication step: step size "
                                 f"{step_size!r} s differs from the first step {c.h!r} s")
+        self._sensor_values = None   # stale from here on, whatever the step's outcome
         try:  # a ConvergenceError leaves the state unchanged: the step may be retried
             c.do_step(self._x, self._z, self._vz)
         except _cosim.DivergenceError as exc:
@@ -388,6 +543,7 @@ class Track(CosimSlave):
     def set_internal_state(self, state: Dict[str, Any]) -> None:
         super().set_internal_state(state)
         self._t_first = state["t_first"]
+        self._sensor_values = None
         if not state["initialized"]:
             self._model = self._built = self._cosim = None
             return

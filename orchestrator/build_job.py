@@ -7,14 +7,27 @@ the scenario: ``speed``, ``static_wheel_load = axle_load / 2`` and ``extrapolate
 (true when the track receives start-of-step inputs, i.e. with the Jacobi algorithm,
 and ``simulation.extrapolation`` asks for it).  Both vehicle FMUs are built as well,
 so one folder serves either vehicle.
+
+The track FMU also gets one output per sensor of the scenario's layout (``sensors:``,
+default ``scenarios/sensors/in2track_like.yaml``), resolved here on the scenario's
+track model (relative positions such as ``sleeper: T``, ``x: T+0.3``) and baked in, so
+the FMU needs no layout file at run time.  The default layout is drawn for a turnout
+(crossing rail, pressure cells across a turnout sleeper); on a track it does not fit (a
+plain track) the track FMU gets no sensor outputs and a warning says why.  A layout the
+scenario names must fit.
 """
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 from .master import INPUTS_AT_START, n_wheels
+from .sensing import scenario_sensors
 
 VEHICLE_KINDS = ("bogie", "quarter")
+log = logging.getLogger(__name__)
+
+
 
 
 def build_fmus(scenario, out_dir: Path) -> dict[str, Path]:
@@ -36,7 +49,8 @@ def build_fmus(scenario, out_dir: Path) -> dict[str, Path]:
     out_dir = Path(out_dir)
     veh, sim = scenario.vehicle, scenario.simulation
     extrapolate = INPUTS_AT_START.get(sim.algorithm, False) and sim.extrapolation
-    built = {"track": build_track_fmu(scenario.track, n_wheels(scenario), out_dir, speed=veh.speed,
+    built = {"track": build_track_fmu(scenario.track, n_wheels(scenario), out_dir,
+                                      sensors=scenario_sensors(scenario), speed=veh.speed,
                                       static_wheel_load=0.5 * veh.axle_load, extrapolate=extrapolate,
                                       extrapolate_force=sim.extrapolation)}
     for kind in VEHICLE_KINDS:

@@ -79,6 +79,15 @@ def _add_scenario_args(p: argparse.ArgumentParser) -> None:
                         "(value in YAML; repeatable)")
 
 
+def _add_executor_options(p: argparse.ArgumentParser) -> None:
+    """--workers, --scheduler, --no-progress: where the runs of a study go (orchestrator.sweep)."""
+    p.add_argument("--workers", metavar="N", type=_positive_int, default=2,
+                   help="local worker processes (default: 2; ignored with --scheduler)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786 (needs dask[distributed])")
+    p.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Crossing-panel co-simulation: track model + vehicle FMUs.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -139,11 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     what.add_argument("--list", metavar="FILE.yaml", type=Path, dest="run_list",
                       help="YAML list of mappings {key.path: value}, one run each")
     swp.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>-sweep)")
-    swp.add_argument("--workers", metavar="N", type=_positive_int, default=2,
-                     help="local worker processes (default: 2; ignored with --scheduler)")
-    swp.add_argument("--scheduler", metavar="ADDRESS",
-                     help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786 (needs dask[distributed])")
-    swp.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+    _add_executor_options(swp)
     swp.set_defaults(handler=_cmd_sweep)
 
     cal = sub.add_parser("calibrate", help="surrogate calibration of scenario parameters against a measurement",
@@ -167,10 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--n2", metavar="N", type=_positive_int, default=500,
                      help="runs of the second hypercube in the narrowed bounds (default 500; plus 2^k corners)")
     cal.add_argument("--seed", metavar="S", type=int, default=0, help="seed of the designs and starts (default 0)")
-    cal.add_argument("--workers", metavar="N", type=_positive_int, default=2,
-                     help="local worker processes (default: 2; ignored with --scheduler)")
-    cal.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786")
-    cal.add_argument("--no-progress", action="store_true", help="do not show progress bars")
+    _add_executor_options(cal)
     cal.set_defaults(handler=_cmd_calibrate)
 
     dia = sub.add_parser("diagnose", help="residuals -> named cause -> extended model -> gain",
@@ -184,10 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
     dia.add_argument("--validate", metavar="FILE@SPEED", action="append", default=[],
                      help="a further measured passage and its speed [m/s], compared before/after (repeatable)")
     dia.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>-diagnosis)")
-    dia.add_argument("--workers", metavar="N", type=_positive_int, default=2,
-                     help="local worker processes (default: 2; ignored with --scheduler)")
-    dia.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786")
-    dia.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+    _add_executor_options(dia)
     dia.set_defaults(handler=_cmd_diagnose)
 
     syn = sub.add_parser("synthesize", help="write a synthetic measurement (a scenario with a hidden effect + noise)",
@@ -211,9 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
     figs.add_argument("--study", choices=("seed001", "seed000", "all"), default="all")
     figs.add_argument("--out", metavar="DIR", type=Path, default=RESULTS_DIR / "figures",
                       help="output folder (default: results/figures)")
-    figs.add_argument("--workers", metavar="N", type=_positive_int, default=2, help="local worker processes")
-    figs.add_argument("--scheduler", metavar="ADDRESS", help="run on a Dask cluster")
-    figs.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
+    _add_executor_options(figs)
     figs.set_defaults(handler=_cmd_figures)
     return parser
 

@@ -15,8 +15,10 @@ The procedure (DESIGN.md §4.5; every threshold is a named constant below):
    without further runs.
 3. **Confirmation.** The :data:`CONFIRM` best candidates are re-run at their best
    magnitude.
-4. **Fit.** The best confirmed candidate, and up to :data:`FIT` - 1 runners-up whose
-   chi-square is within a factor :data:`FIT_RATIO` of its own, get all their parameters fitted
+4. **Fit.** Every confirmed candidate is fitted coarsely (a void as a wedge, see
+   :func:`_stages`; the other causes have one parameter); the best of them, and up to
+   :data:`FIT` - 1 runners-up whose chi-square is within a factor :data:`FIT_RATIO` of
+   its own, then get all their parameters fitted
    (a void's six gaps; the other causes have one) by bounded least squares
    (:func:`scipy.optimize.least_squares`, ``trf``) on the weighted, normalised
    residuals, with the finite-difference Jacobian's runs done in parallel.
@@ -57,7 +59,8 @@ CONFIRM = 4          # candidates re-run at their screened optimum
 FIT = 2              # candidates whose full parameter set is fitted, at most ...
 FIT_RATIO = 2.0      # ... of those whose confirmed chi-square is within this factor of the best's
 DENSE = 121          # points of the 1-D search between screening runs
-FIT_MAX_NFEV = 6     # least-squares iterations of a fit (each: one run + a parallel Jacobian)
+FIT_MAX_NFEV = 5     # least-squares iterations of a coarse fit (each: one run + a parallel Jacobian) ...
+FINE_MAX_NFEV = 8    # ... and of the fine stages (six gaps)
 FIT_STEP = 0.02      # finite-difference step in the unit parameter cube
 SENSOR_REACH = 0     # local causes on the sleepers carrying sensors +- this many
 
@@ -154,11 +157,11 @@ def _dense_search(target: Target, kind, xs: np.ndarray, signals: list[dict]) -> 
     ids = list(signals[0])
     Y = np.stack([np.concatenate([sig[k] for k in ids]) for sig in signals])   # (nx, total)
     sizes = np.cumsum([0] + [signals[0][k].size for k in ids])
-    interp = PchipInterpolator(u, Y, axis=0)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):   # flat stretches of a signal
+        interp = PchipInterpolator(u, Y, axis=0)
     best = None
     for ud in np.linspace(u[0], u[-1], DENSE):
-        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):   # flat stretches of a signal
-            row = interp(ud)
+        row = interp(ud)
         on = {k: row[sizes[i]:sizes[i + 1]] for i, k in enumerate(ids)}
         cmp = target.score(on)
         if best is None or cmp.chi2 < best[1].chi2:
@@ -166,8 +169,23 @@ def _dense_search(target: Target, kind, xs: np.ndarray, signals: list[dict]) -> 
     return best
 
 
-def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated) -> Evaluated:
-    """All parameters of a candidate by bounded least squares (module doc, step 4)."""
+def _stages(kind) -> list:
+    """Coarse-to-fine parameterisations of a fit: (number of parameters, map to the unit cube).
+
+    A void is first fitted as a wedge (the gaps linear between the sleeper's ends: 2
+    parameters, well conditioned, covering a uniform gap) and then point by point from
+    there; six free gaps straight from a uniform start stall in the non-smooth contact
+    response. The other causes have one parameter.
+    """
+    n = len(kind.names)
+    if n == 1:
+        return [(1, lambda p: np.asarray(p, float))]
+    return [(2, lambda p: np.linspace(p[0], p[1], n)), (n, lambda p: np.asarray(p, float))]
+
+
+def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated, stages: slice = slice(None),
+         max_nfev: int = FIT_MAX_NFEV) -> Evaluated:
+    """A candidate's parameters by bounded least squares, through ``_stages(kind)[stages]`` (module doc, step 4)."""
     from scipy.optimize import least_squares
 
     c = start.candidate
@@ -175,35 +193,38 @@ def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated) -> Evaluated:
     cache: dict[bytes, Comparison] = {}
 
     def runs(us: list[np.ndarray]) -> list[Comparison]:
-        todo = [u for u in us if u.tobytes() not in cache]
+        todo = list({u.tobytes(): u for u in us if u.tobytes() not in cache}.values())
         if todo:
             out = pool.map([kind.apply(raw, c.sleeper, kind.from_unit(u)) for u in todo])
             for u, run in zip(todo, out):
                 cache[u.tobytes()] = _comparison(target, run)
         return [cache[u.tobytes()] for u in us]
 
-    def fun(u):
-        return target.weighted_residuals(runs([np.asarray(u, float)])[0])
+    u_best = np.clip(kind.to_unit(start.values), 0.0, 1.0)
+    k = start.k
+    for n, to_u in _stages(kind)[stages]:
+        k = n
+        def fun(p, to_u=to_u):
+            return target.weighted_residuals(runs([np.clip(to_u(p), 0.0, 1.0)])[0])
 
-    def jac(u):
-        u = np.asarray(u, float)
-        steps = []
-        for i in range(u.size):
-            du = np.zeros_like(u)
-            du[i] = FIT_STEP if u[i] + FIT_STEP <= 1.0 else -FIT_STEP
-            steps.append((u + du, du[i]))
-        cmps = runs([s for s, _ in steps])
-        r0 = fun(u)
-        return np.column_stack([(target.weighted_residuals(cm) - r0) / d for cm, (_, d) in zip(cmps, steps)])
+        def jac(p, to_u=to_u):
+            p = np.asarray(p, float)
+            steps = []
+            for i in range(p.size):
+                dp = np.zeros_like(p)
+                dp[i] = FIT_STEP if p[i] + FIT_STEP <= 1.0 else -FIT_STEP
+                steps.append((p + dp, dp[i]))
+            cmps = runs([np.clip(to_u(q), 0.0, 1.0) for q, _ in steps])
+            r0 = fun(p)
+            return np.column_stack([(target.weighted_residuals(cm) - r0) / d for cm, (_, d) in zip(cmps, steps)])
 
-    u0 = np.clip(kind.to_unit(start.values), 0.0, 1.0)
-    least_squares(fun, u0, jac=jac, bounds=(0.0, 1.0), method="trf", max_nfev=FIT_MAX_NFEV,
-                        x_scale=1.0, diff_step=None)
-    best_u = min(cache, key=lambda b: cache[b].chi2)
-    u_best = np.frombuffer(best_u, dtype=float)
-    if cache[best_u].chi2 > start.cmp.chi2:   # the fit never did better than its start
-        return Evaluated(c, start.values, start.cmp, len(kind.names), "fitted")
-    return Evaluated(c, kind.from_unit(u_best), cache[best_u], len(kind.names), "fitted")
+        p0 = u_best[[0, -1]] if n == 2 else u_best   # the wedge starts from the current ends
+        least_squares(fun, np.clip(p0, 0.0, 1.0), jac=jac, bounds=(0.0, 1.0), method="trf", max_nfev=max_nfev)
+        u_best = np.frombuffer(min(cache, key=lambda b: cache[b].chi2), dtype=float).copy()
+    best = cache[u_best.tobytes()]
+    if best.chi2 > start.cmp.chi2:   # the fit never did better than its start
+        return Evaluated(c, start.values, start.cmp, k, "fitted")
+    return Evaluated(c, kind.from_unit(u_best), best, k, "fitted")
 
 
 def _comparison(target: Target, run) -> Comparison:
@@ -312,13 +333,18 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
         runs = pool.map([kind_of(c).apply(raw0, c.sleeper, dense[c].values) for c in top])
         confirmed = {c: Evaluated(c, dense[c].values, _comparison(target, r), 1, "confirmed") for c, r in zip(top, runs)}
 
-        # 4. fit the best confirmed candidates' full parameter sets
-        fitted = {}
-        by_fit = sorted(confirmed, key=lambda c: confirmed[c].bic())
-        lead = confirmed[by_fit[0]].cmp.chi2
-        for c in [c for c in by_fit if confirmed[c].cmp.chi2 <= FIT_RATIO * lead][:FIT]:
-            bar.total += FIT_MAX_NFEV * (len(kind_of(c).names) + 1)
-            fitted[c] = _fit(pool, target, raw0, confirmed[c])
+        # 4. fit: the first (coarse) stage for every confirmed candidate, the finer ones for the
+        #    best and the runners-up close to it
+        for c in top:
+            bar.total += FIT_MAX_NFEV * (_stages(kind_of(c))[0][0] + 1)
+        coarse = {c: _fit(pool, target, raw0, confirmed[c], slice(0, 1)) for c in top}
+        by_fit = sorted(coarse, key=lambda c: coarse[c].bic())
+        lead = coarse[by_fit[0]].cmp.chi2
+        fitted = dict(coarse)
+        for c in [c for c in by_fit if coarse[c].cmp.chi2 <= FIT_RATIO * lead][:FIT]:
+            if len(_stages(kind_of(c))) > 1:
+                bar.total += FINE_MAX_NFEV * sum(n + 1 for n, _ in _stages(kind_of(c))[1:])
+                fitted[c] = _fit(pool, target, raw0, coarse[c], slice(1, None), FINE_MAX_NFEV)
 
         # 5. ranking
         final = {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in cands}

@@ -20,8 +20,12 @@ Seed 000 (Vilhelmson et al.), 1:12 crossing panel (the default scenario):
 - fig6_receptance.png, seed000_receptance.csv: direct receptance at the crossing nose
   (the transition point), beam vs 3D solid crossing rail, 5 Hz - 2 kHz (seed Fig. 6),
   with the models' cut-off raised to 2.5 kHz.
-The measured / nominal / calibrated ballast pressures need the measurement loop
-(seed000_README.txt says so).
+- fig_seed000_pressure.png, seed000_pressure.csv: ballast pressure along the crossing
+  transition sleeper (sensor group A), "measured" vs nominal vs calibrated model. There is
+  no field record in this repository: the "measurement" is synthetic — the measurement
+  scenario (one wheelset, 120 km/h) with a void under the transition sleeper like the one
+  seed 000 found, 1 % noise — and the calibrated model is what `turnout diagnose` fits
+  to it (seed000_pressure/: diagnosis.json, report.md, extended.yaml).
 """
 from __future__ import annotations
 
@@ -194,9 +198,11 @@ def seed000_table(out_dir: Path) -> list[Path]:
         w.writerows(rows)
     note = Path(out_dir) / "seed000_README.txt"
     note.write_text(
-        "Seed 000 figures in this version: Table 1 (seed000_table1.csv) and Fig. 6, the receptance at the\n"
-        "crossing nose, beam vs 3D solid crossing rail (fig6_receptance.png, seed000_receptance.csv).\n"
-        "Not yet available here: the measured / nominal / calibrated ballast pressures (measurement loop).\n")
+        "Seed 000 figures: Table 1 (seed000_table1.csv); Fig. 6, the receptance at the crossing nose, beam vs\n"
+        "3D solid crossing rail (fig6_receptance.png, seed000_receptance.csv); the ballast pressure along the\n"
+        "transition sleeper, measured vs nominal vs calibrated (fig_seed000_pressure.png, seed000_pressure.csv)\n"
+        "- the 'measurement' is synthetic (a void under the transition sleeper, 1 % noise), the calibrated\n"
+        "model is what `turnout diagnose` fits (seed000_pressure/report.md).\n")
     return [path, note] + seed000_receptance(out_dir)
 
 
@@ -238,6 +244,78 @@ def seed000_receptance(out_dir: Path, fmax: float = FRF_FMAX, n_freqs: int = 400
     return [csv_path, png]
 
 
+SEED000_MEASURED = "measurement/crossing_quarter_120.yaml"
+SEED000_VOID = (0.0, 0.4e-3, 0.9e-3, 0.9e-3, 0.4e-3, 0.0)   # m: DESIGN.md §4.2's example void profile
+
+
+def seed000_pressure(out_dir: Path, workers: int = 2, scheduler: str | None = None,
+                     progress: bool = True) -> list[Path]:
+    """Seed 000's measured vs nominal vs calibrated ballast pressure (module docstring)."""
+    from .analysis import reference_point
+    from .diagnose import diagnose
+    from .objective import Target
+    from .plots import save
+    from .scenario import bundled_scenario, load_scenario
+    from .sensing import layout_of, simulate_sensors
+    from .sensor_layout import resolve
+    from .synthetic import Effect, synthesize
+    from track.model import build_track
+
+    out_dir = Path(out_dir)
+    path = bundled_scenario(SEED000_MEASURED)
+    sc = load_scenario(path)
+    model = build_track(sc.track)
+    k_t = reference_point(model)[2]
+    work = out_dir / "seed000_pressure"
+    work.mkdir(parents=True, exist_ok=True)
+    measured = work / "field_passage_synthetic.csv"
+    synthesize(sc, Effect("ballast_void", k_t, {"gaps": list(SEED000_VOID)}), measured, seed=0)
+    result = diagnose(path, measured, work, workers=workers, scheduler=scheduler, progress=progress)
+    layout = layout_of(sc)
+    cells = [s for s in resolve(layout, model) if s.group == "A"]
+    target = Target.read(measured, layout)
+    lines = {}
+    for label, scen in (("nominal", sc), ("calibrated", load_scenario(work / result["extended_scenario"]))):
+        run = simulate_sensors(scen, layout, reconstruct=False)
+        if target.shift is None:
+            target.align_to(run.t, run.signals)
+        lines[label] = target.compare(run.t, run.signals).simulated
+    y = np.array([c.coord for c in cells])
+    peak = {"measured": [np.nanmax(target.measured.channels[c.id]) for c in cells]}
+    peak.update({k: [np.nanmax(v[c.id]) for c in cells] for k, v in lines.items()})
+    csv_path = out_dir / "seed000_pressure.csv"
+    with csv_path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["sensor", "y [m]", "measured peak [Pa]", "nominal peak [Pa]", "calibrated peak [Pa]"])
+        for i, c in enumerate(cells):
+            w.writerow([c.id, f"{c.coord:.3f}"] + [f"{peak[k][i]:.1f}" for k in ("measured", "nominal", "calibrated")])
+    plt = _plt()
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    for label, style in (("measured", dict(c="0.3", marker="o", ls="")), ("nominal", dict(c="C0", marker="s")),
+                         ("calibrated", dict(c="C3", marker="^", ls="--"))):
+        ax[0].plot(y, 1e-3 * np.array(peak[label]), label=label, **style)
+    ax[0].set_xlabel("lateral position on the transition sleeper y [m]")
+    ax[0].set_ylabel("peak ballast pressure [kPa]")
+    ax[0].set_title(f"sleeper {k_t}: peak pressure per cell")
+    worst = max(cells, key=lambda c: abs(peak["nominal"][cells.index(c)] - peak["measured"][cells.index(c)]))
+    t = target.measured.t
+    ax[1].plot(t, 1e-3 * target.measured.channels[worst.id], c="0.3", lw=0.8, label="measured")
+    for label, c in (("nominal", "C0"), ("calibrated", "C3")):
+        ax[1].plot(t, 1e-3 * lines[label][worst.id], c=c, lw=1.0, label=label)
+    ax[1].set_xlabel("time [s]")
+    ax[1].set_ylabel(f"{worst.id} pressure [kPa]")
+    named = result["named_cause"]
+    ax[1].set_title(f"calibrated: {named['cause']}" + (f" at sleeper {named['sleeper']}" if "sleeper" in named else ""))
+    for a in ax:
+        a.grid(alpha=0.3)
+        a.legend(fontsize=8)
+    fig.suptitle("seed 000: measured (synthetic) vs nominal vs calibrated ballast pressure")
+    fig.tight_layout()
+    png = out_dir / "fig_seed000_pressure.png"
+    save(fig, png)
+    return [csv_path, png, work / "report.md"]
+
+
 def make_figures(out_dir: Path, study: str = "all", workers: int = 2, scheduler: str | None = None,
                  progress: bool = True, speeds_kmh=None) -> list[Path]:
     """Run the studies (resumable) and write the figures into ``out_dir``.
@@ -263,4 +341,5 @@ def make_figures(out_dir: Path, study: str = "all", workers: int = 2, scheduler:
         files.append(table)
     if study in ("seed000", "all"):
         files += seed000_table(out_dir)
+        files += seed000_pressure(out_dir, workers=workers, scheduler=scheduler, progress=progress)
     return files

@@ -122,14 +122,16 @@ def _virtual_sensors(scenario, model, res) -> dict:
     """The sensor layout's signals (DESIGN.md §4.3) at the output times; {} without a track record."""
     from track.sensors import compile_sensors, sensor_signals
 
-    from .sensing import layout_of
-    from .sensor_layout import resolve
+    from .sensing import layout_of, scenario_sensors
 
     rec = res.track_record
     if rec is None or "a" not in rec or len(rec["t"]) < 2 or len(rec["t"]) != len(res.t):
         return {}
+    sensors = scenario_sensors(scenario, model)
+    if not sensors:
+        return {}
     layout = layout_of(scenario)
-    compiled = compile_sensors(model, resolve(layout, model))
+    compiled = compile_sensors(model, sensors)
     dt = float(np.median(np.diff(rec["t"])))
     return sensor_signals(model, compiled, rec["q"], rec["v"], rec["a"], dt, layout.displacement_highpass)
 

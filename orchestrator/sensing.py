@@ -9,6 +9,7 @@ takes the scenario as a validated raw mapping.
 from __future__ import annotations
 
 import copy
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +19,8 @@ from track.model import build_track
 from track.sensors import compile_sensors, sensor_signals
 
 from .sensor_layout import SensorLayout, load_layout, resolve
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -42,6 +45,33 @@ class SensorRun:
 def layout_of(scenario) -> SensorLayout:
     """The scenario's sensor layout (``sensors:``), or the default one."""
     return load_layout(scenario.sensors)
+
+
+def scenario_sensors(scenario, model=None) -> list:
+    """The scenario's sensor layout resolved on its track model.
+
+    Returns
+    -------
+    list of track.sensors.Sensor
+        Empty when the scenario gives no layout and the default one does not fit its
+        track (e.g. plain track: logged as a warning).
+
+    Raises
+    ------
+    UserInputError
+        The scenario's layout file is invalid or one of its sensors does not fit this track.
+    """
+    from .errors import UserInputError
+
+    layout = layout_of(scenario)
+    try:
+        return resolve(layout, build_track(scenario.track) if model is None else model)
+    except UserInputError as exc:
+        if scenario.sensors is not None:
+            raise
+        log.warning("the default sensor layout does not fit this track (%s): no sensor signals; "
+                    "give the scenario a layout (sensors:) for them", exc)
+        return []
 
 
 def simulate_sensors(scenario, layout: SensorLayout | None = None, reconstruct: bool = True) -> SensorRun:
@@ -87,4 +117,4 @@ def sensors_job(raw: dict, base_dir: str, layout_path: str | None, reconstruct: 
     return simulate_sensors(scenario, layout, reconstruct=reconstruct)
 
 
-__all__ = ["variant_for_speed", "SensorRun", "simulate_sensors", "sensors_job", "layout_of"]
+__all__ = ["scenario_sensors", "variant_for_speed", "SensorRun", "simulate_sensors", "sensors_job", "layout_of"]

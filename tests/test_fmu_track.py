@@ -1,5 +1,6 @@
 """Track FMU standalone in FMPy: validation, statics against the track's own static
-stiffness, parameters, FMU state, errors, recording, and coupling with the bogie FMU."""
+stiffness, parameters, FMU state, errors, recording, coupling with the bogie FMU, and
+the sensor outputs (one per sensor of the scenario's layout) against track.sensors."""
 from __future__ import annotations
 
 import dataclasses
@@ -485,3 +486,239 @@ def test_build_fmus_for_a_scenario(plain_scenario, tmp_path):
     default = read_model_description(str(build_fmu("track", tmp_path / "default")))
     names = {v.name: v for v in default.modelVariables}
     assert "wheel4_Fz" in names and float(names["impact_angle"].start) == TrackParams().impact_angle
+
+
+# ------------------------------------------------------------------------- sensor outputs
+QUARTER_SCENARIO = "measurement/crossing_quarter_120.yaml"   # sensors: ../sensors/in2track_like.yaml
+H_SENSORS = 2e-4        # s: the scenario's communication step
+N_SENSOR_STEPS = 40     # steps (8 ms) of a wheelset creeping towards the crossing transition
+EPS = np.finfo(float).eps
+
+
+@pytest.fixture(scope="module")
+def crossing_fmu(tmp_path_factory, scenarios_dir):
+    """The quarter scenario's track (40-sleeper 1:12 turnout) as a 2-wheel FMU with the
+    scenario's sensor layout, resolved and baked by orchestrator.build_job."""
+    from orchestrator.sensing import scenario_sensors
+    from orchestrator.scenario import load_scenario
+
+    scenario = load_scenario(scenarios_dir / QUARTER_SCENARIO)
+    sensors = scenario_sensors(scenario)
+    out = tmp_path_factory.mktemp("crossing_fmu")
+    path = build_track_fmu(scenario.track, 2, out, name="crossing2", sensors=sensors, speed=2.0,
+                           extrapolate=False, static_wheel_load=0.5 * scenario.vehicle.axle_load)
+    files = {"crossing2": (path, extract(str(path), unzipdir=str(out / "x")))}
+    return {"scenario": scenario, "sensors": sensors, "path": path, "files": files}
+
+
+def sensor_output_names(sensors) -> list[str]:
+    """The FMU's sensor outputs in SensorReader's order: the sensors, then <id>_acc per displacement sensor."""
+    return [s.id for s in sensors] + [s.id + "_acc" for s in sensors if s.type == "displacement"]
+
+
+def creep_to_transition(inst, sensors, k0, n, x_transition):
+    """Both wheels 0.5 m before the crossing transition creeping at 2 m/s with a 20 um,
+    40 Hz vertical wave; returns the sensor outputs and the wheel outputs after each step."""
+    names = sensor_output_names(sensors)
+    vrs = [inst.vr[name] for name in names]
+    out, wheels = [], []
+    for k in range(k0, k0 + n):
+        t = k * H_SENSORS
+        x = x_transition - 0.5 + 2.0 * t
+        phase = 2 * np.pi * 40.0 * t + np.arange(2)
+        inst.set("x", [x, x])
+        inst.set("z", 2e-5 * np.sin(phase))
+        inst.set("vz", 2e-5 * 2 * np.pi * 40.0 * np.cos(phase))
+        inst.fmu.doStep(t, H_SENSORS)
+        out.append(inst.fmu.getReal(vrs))
+        wheels.append(inst.outputs())
+    return np.array(out), np.array(wheels)
+
+
+def test_every_sensor_of_the_layout_is_an_output_with_its_unit(crossing_fmu):
+    """DESIGN §4.4: one Real output per sensor id of the scenario's layout, the unit in
+    the description and the unit attribute; an <id>_acc accelerometer output per
+    displacement sensor; the FMU validates clean and carries the resolved sensors, not
+    the layout file."""
+    import zipfile
+
+    from orchestrator.sensing import layout_of
+
+    layout = layout_of(crossing_fmu["scenario"])
+    md = read_model_description(str(crossing_fmu["path"]))
+    by_name = {v.name: v for v in md.modelVariables}
+    units = {"pressure": "Pa", "acceleration": "m/s2", "strain": "-", "displacement": "m"}
+    assert {"pressure", "displacement", "acceleration", "strain"} <= set(layout.types.values())
+    for sid, kind in layout.types.items():
+        v = by_name[sid]
+        assert v.causality == "output" and v.type == "Real" and v.variability == "continuous"
+        assert v.description.endswith(f"[{units[kind]}]")
+        assert v.unit == (None if units[kind] == "-" else units[kind])
+        if kind == "displacement":
+            acc = by_name[f"{sid}_acc"]
+            assert acc.causality == "output" and acc.unit == "m/s2" and acc.description.endswith("[m/s2]")
+    assert sum(name.endswith("_acc") for name in by_name) == sum(k == "displacement" for k in layout.types.values())
+    assert all(u.dependencies == [] for u in md.outputs)          # functions of the state only
+    assert validate_fmu(str(crossing_fmu["path"])) == []
+    with zipfile.ZipFile(crossing_fmu["path"]) as zf:
+        baked = json.loads(zf.read("resources/track_fmu.json"))
+        assert not any(n.endswith(".yaml") for n in zf.namelist())
+    assert [s["id"] for s in baked["sensors"]] == layout.ids
+    assert {s["body"] for s in baked["sensors"] if s["id"].startswith("A")} == {"sleeper_21"}  # T resolved
+
+
+def test_sensor_outputs_are_the_sensor_rows_on_the_fmu_state(crossing_fmu, tmp_path):
+    """The sensor outputs after each step equal track.sensors.sensor_signals (pressure,
+    acceleration, strain; displacement sensors' <id>_acc: their accelerometer) and
+    displacement_row @ q (displacement sensors) evaluated in-process on the FMU's own
+    states (recorded every step to record_file), on a model rebuilt from the recorded
+    effective parameters.
+
+    Tolerance: the states are the FMU's, bit for bit, and the bushing pressures are the
+    same elementwise operations on them; what differs is only how the products sum their
+    terms (the FMU's rows restricted to their non-zero columns against full rows in
+    BLAS, another order and blocking).  Each of two n-term dot products is within
+    gamma_n = n eps / (1 - n eps) of |c|.|x| (Higham, Accuracy and Stability, eq. 3.5),
+    so they differ by at most 2 gamma_n |c|.|x|, n = the model's 1741 coordinates
+    (about 4e-13 relative to |c|.|x|)."""
+    from track.layout import build_layout
+    from track.sensors import compile_sensors, displacement_row, sensor_signals
+
+    scenario, sensors = crossing_fmu["scenario"], crossing_fmu["sensors"]
+    x_transition = build_layout(scenario.track.layout).x_transition
+    record = tmp_path / "record.npz"
+    inst = Instance(crossing_fmu["files"], "crossing2", "sensors_vs_rows").init(record_every=1,
+                                                                               record_file=str(record))
+    names = sensor_output_names(sensors)
+    try:
+        before = np.array(inst.fmu.getReal([inst.vr[n] for n in names]))
+        out, wheels = creep_to_transition(inst, sensors, 0, N_SENSOR_STEPS, x_transition)
+    finally:
+        inst.close()                                       # terminate writes the record
+    np.testing.assert_array_equal(before, 0.0)             # documented: 0 until the first step
+    assert np.all(np.abs(wheels[:, :2] / (0.5 * scenario.vehicle.axle_load) - 1.0) < 0.05)  # wheels in contact
+
+    rec = np.load(record)
+    q, v, a = rec["q"][1:], rec["v"][1:], rec["a"][1:]     # sample 0: the static start, before step 1
+    assert q.shape[0] == N_SENSOR_STEPS
+    model = build_track(track_params_from_dict(json.loads(rec["track_params"].item())))
+    compiled = compile_sensors(model, sensors)
+    sig = sensor_signals(model, compiled, q, v, a, H_SENSORS, reconstruct=False)
+    D = model.ballast.dof
+    p = model.ballast.pressure(q[:, D], v[:, D])
+    expected, scale = {}, {}
+    for i, s in enumerate(sensors):
+        if s.type == "displacement":
+            row = displacement_row(model, s.body, s.coord)
+            expected[s.id], scale[s.id] = q @ row, np.abs(q) @ np.abs(row)
+            expected[s.id + "_acc"], scale[s.id + "_acc"] = sig[s.id], np.abs(a) @ np.abs(compiled.Ca[i])
+        else:
+            expected[s.id] = sig[s.id]
+            scale[s.id] = (np.abs(q) @ np.abs(compiled.Cq[i]) + np.abs(a) @ np.abs(compiled.Ca[i])
+                           + np.abs(p) @ np.abs(compiled.Pb[i]))
+    n = model.n
+    gamma = n * EPS / (1 - n * EPS)
+    for j, name in enumerate(names):
+        np.testing.assert_array_less(np.abs(out[:, j] - expected[name]), 2 * gamma * scale[name] + 1e-300,
+                                     err_msg=name)
+    # the signals are the track's response, not zeros: the transition sleeper presses on the
+    # ballast, the crossing rail and the sleepers accelerate (the 40 Hz wave), strains vary
+    col = {name: out[:, j] for j, name in enumerate(names)}
+    assert all(np.all(col[f"A{k}"] > 0.0) for k in (2, 3, 4))     # under the loaded middle of sleeper T
+    assert all(np.ptp(col[name]) > 0.0 for name in ("E1", "E2", "B3_acc", "D1", "F1", "B3"))
+
+
+def test_sensor_reader_matches_sensor_signals_with_open_bushings(scenarios_dir):
+    """SensorReader (the FMU's per-step evaluation) against track.sensors on random
+    states of a turnout with a void under the transition sleeper, where some bushings
+    under the pressure cells are open and some closed: the restricted ballast evaluates
+    the same bi-linear law.  Tolerance as in the FMU test above: 2 gamma_n |c|.|x|."""
+    from orchestrator.scenario import load_scenario
+    from orchestrator.sensing import layout_of
+    from orchestrator.sensor_layout import resolve
+
+    from fmus.track_fmu import SensorReader
+    from track.sensors import compile_sensors, displacement_row, sensor_signals
+
+    scenario = load_scenario(scenarios_dir / QUARTER_SCENARIO)
+    void = VoidSpec(21, (0.0, 2e-4, 6e-4, 6e-4, 2e-4, 0.0))          # under the transition sleeper T
+    ballast = dataclasses.replace(scenario.track.ballast, voids=(void,))
+    params = dataclasses.replace(scenario.track, ballast=ballast)
+    model = build_track(params)
+    sensors = resolve(layout_of(scenario), model)
+    reader = SensorReader(model, sensors)
+    compiled = compile_sensors(model, sensors)
+    rng = np.random.default_rng(7)
+    n, D = model.n, model.ballast.dof
+    on_cells = np.flatnonzero(np.any(compiled.Pb != 0.0, axis=0))
+    gamma = n * EPS / (1 - n * EPS)
+    n_open = 0
+    for _ in range(20):
+        q = rng.normal(-4e-4, 4e-4, n)          # m: bushings around their gap, some open, some closed
+        v, a = rng.normal(0.0, 1e-2, n), rng.normal(0.0, 10.0, n)
+        got = reader.read(q, v, a).copy()
+        sig = sensor_signals(model, compiled, q, v, a, H_SENSORS, reconstruct=False)
+        p = model.ballast.pressure(q[D], v[D])
+        n_open += int(np.sum(p[on_cells] == 0.0))
+        expected, scale = [], []
+        for i, s in enumerate(sensors):
+            if s.type == "displacement":
+                row = displacement_row(model, s.body, s.coord)
+                expected.append(q @ row)
+                scale.append(np.abs(q) @ np.abs(row))
+            else:
+                expected.append(sig[s.id][0])
+                scale.append(np.abs(q) @ np.abs(compiled.Cq[i]) + np.abs(a) @ np.abs(compiled.Ca[i])
+                             + np.abs(p) @ np.abs(compiled.Pb[i]))
+        for i, s in enumerate(sensors):      # then the accelerometers of the displacement sensors
+            if s.type == "displacement":
+                expected.append(sig[s.id][0])
+                scale.append(np.abs(a) @ np.abs(compiled.Ca[i]))
+        np.testing.assert_array_less(np.abs(got - np.array(expected)), 2 * gamma * np.array(scale) + 1e-300)
+    assert 0 < n_open < 20 * on_cells.size       # both branches of the ballast law were exercised
+
+
+def test_fmu_state_round_trip_restores_the_sensor_outputs(crossing_fmu):
+    """get state, step, set state: the sensor outputs read right after the restore are
+    those of the saved point, and the steps repeat bit-identically (wheel and sensor
+    outputs), also through serialisation into a second instance."""
+    from track.layout import build_layout
+
+    sensors = crossing_fmu["sensors"]
+    x_t = build_layout(crossing_fmu["scenario"].track.layout).x_transition
+    names = sensor_output_names(sensors)
+    inst = Instance(crossing_fmu["files"], "crossing2", "sensor_state_a").init()
+    other = Instance(crossing_fmu["files"], "crossing2", "sensor_state_b").init()
+    try:
+        creep_to_transition(inst, sensors, 0, 5, x_t)
+        state = inst.fmu.getFMUstate()
+        at_save = np.array(inst.fmu.getReal([inst.vr[n] for n in names]))
+        first = creep_to_transition(inst, sensors, 5, 10, x_t)
+        assert np.ptp(first[0][:, names.index("E1")]) > 0.0    # the outputs do change over the steps
+        inst.fmu.setFMUstate(state)
+        assert np.array_equal(inst.fmu.getReal([inst.vr[n] for n in names]), at_save)
+        second = creep_to_transition(inst, sensors, 5, 10, x_t)
+        assert all(np.array_equal(f, s) for f, s in zip(first, second))
+        blob = inst.fmu.serializeFMUstate(state)
+        inst.fmu.freeFMUstate(state)
+        other.fmu.setFMUstate(other.fmu.deSerializeFMUstate(blob))
+        assert np.array_equal(other.fmu.getReal([other.vr[n] for n in names]), at_save)
+        third = creep_to_transition(other, sensors, 5, 10, x_t)
+        assert all(np.array_equal(f, t) for f, t in zip(first, third))
+    finally:
+        inst.close()
+        other.close()
+
+
+def test_build_job_sensor_layout_policy(plain_scenario, scenarios_dir, caplog):
+    """The default layout is drawn for a turnout: on the plain track it does not fit,
+    so build_fmus bakes no sensors and warns; a layout the scenario names must fit."""
+    from orchestrator.sensing import scenario_sensors
+    from orchestrator.errors import UserInputError
+
+    with caplog.at_level(logging.WARNING, logger="orchestrator.sensing"):
+        assert scenario_sensors(plain_scenario) == []
+    assert any("default sensor layout does not fit" in r.getMessage() for r in caplog.records)
+    named = dataclasses.replace(plain_scenario, sensors=str(scenarios_dir / "sensors" / "in2track_like.yaml"))
+    with pytest.raises(UserInputError, match="A5"):
+        scenario_sensors(named)

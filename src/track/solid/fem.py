@@ -28,6 +28,26 @@ def lame(E: float, nu: float) -> tuple[float, float]:
     return lame_parameters(E, nu)
 
 
+def _corner_mesh(points: np.ndarray, tets: np.ndarray):
+    """scikit-fem's linear mesh of our 10-node tets and the maps back to our nodes.
+
+    Returns ``(mesh, corners, node_of_edge)``: ``corners`` our node of each mesh vertex,
+    ``node_of_edge`` our mid-edge node of each scikit-fem edge (matched through the
+    element-to-edge table: local edge k of element e is TET_EDGES[k]).
+    """
+    import skfem
+
+    corners = np.unique(tets[:, :4])
+    renum = np.full(points.shape[0], -1, dtype=np.int64)
+    renum[corners] = np.arange(corners.size)
+    mesh = skfem.MeshTet1(points[corners].T.copy(), renum[tets[:, :4]].T.astype(np.int32).copy())
+    if not np.array_equal(mesh.t, renum[tets[:, :4]].T):
+        raise RuntimeError("scikit-fem reordered the tetrahedra corners")
+    node_of_edge = np.empty(mesh.edges.shape[1], dtype=np.int64)
+    node_of_edge[mesh.t2e.ravel()] = tets[:, 4:].T.ravel()
+    return mesh, corners, node_of_edge
+
+
 def _basis(points: np.ndarray, tets: np.ndarray, intorder: int):
     """scikit-fem vector P2 basis on the corner mesh and the permutation to our dofs.
 
@@ -38,18 +58,8 @@ def _basis(points: np.ndarray, tets: np.ndarray, intorder: int):
 
     points = np.asarray(points, dtype=float)
     tets = np.asarray(tets)
-    corners = np.unique(tets[:, :4])
-    renum = np.full(points.shape[0], -1, dtype=np.int64)
-    renum[corners] = np.arange(corners.size)
-    mesh = skfem.MeshTet1(points[corners].T.copy(), renum[tets[:, :4]].T.astype(np.int32).copy())
-    if not np.array_equal(mesh.t, renum[tets[:, :4]].T):
-        raise RuntimeError("scikit-fem reordered the tetrahedra corners")
+    mesh, corners, node_of_edge = _corner_mesh(points, tets)
     basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP2()), intorder=intorder)
-
-    # scikit-fem dof -> our node: corner nodes are the mesh vertices, edge dofs are matched
-    # through the element-to-edge table (local edge k of element e is TET_EDGES[k]).
-    node_of_edge = np.empty(mesh.edges.shape[1], dtype=np.int64)
-    node_of_edge[mesh.t2e.ravel()] = tets[:, 4:].T.ravel()
     n = points.shape[0]
     perm = np.empty(basis.N, dtype=np.int64)                       # skfem dof -> our dof
     comp = np.arange(3)[:, None]
@@ -146,13 +156,8 @@ def probe_matrix(points: np.ndarray, tets: np.ndarray, X: np.ndarray) -> sp.csr_
 
     points = np.asarray(points, dtype=float)
     tets = np.asarray(tets)
-    corners = np.unique(tets[:, :4])
-    renum = np.full(points.shape[0], -1, dtype=np.int64)
-    renum[corners] = np.arange(corners.size)
-    mesh = skfem.MeshTet1(points[corners].T.copy(), renum[tets[:, :4]].T.astype(np.int32).copy())
+    mesh, corners, node_of_edge = _corner_mesh(points, tets)
     basis = skfem.Basis(mesh, skfem.ElementTetP2())
-    node_of_edge = np.empty(mesh.edges.shape[1], dtype=np.int64)
-    node_of_edge[mesh.t2e.ravel()] = tets[:, 4:].T.ravel()
     node_of = np.empty(basis.N, dtype=np.int64)                  # skfem dof -> our node
     node_of[basis.nodal_dofs[0]] = corners
     node_of[basis.edge_dofs[0]] = node_of_edge
