@@ -254,6 +254,9 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
              progress: bool = True) -> dict:
     """Run the diagnosis (module docstring); write diagnosis.json, extended.yaml, report.md, plots.
 
+    ``baseline.json`` (the nominal model's residuals: step 1) is written as soon as it is
+    known, so a diagnosis that fails later keeps it.
+
     Parameters
     ----------
     scenario_path : path-like
@@ -313,6 +316,10 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
             raise UserInputError(f"{scenario_path}: the nominal run stopped early: {base_run.error}")
         target.align_to(base_run.t, base_run.signals)
         base = Evaluated(Candidate("none"), np.zeros(0), _comparison(target, base_run), 0, "nominal")
+        # what the simulation gets wrong is on disk before the long part starts
+        (out_dir / "baseline.json").write_text(json.dumps(
+            {**base.cmp.summary(), "bic": base.bic(), "where": _where(base.cmp, sensors),
+             "noise_sigma": target.sigma}, indent=1, default=_json_default))
 
         # 2. screening: all candidates x grid in one batch
         jobs = [(c, x) for c in cands for x in axes[c][0] if abs(x - axes[c][1]) > 1e-12]
@@ -393,8 +400,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
                               "reason": "no candidate explains the residual better than the noise does"}}
     result = {
         "scenario": str(scenario_path), "measured": str(measured_path),
-        "baseline": {**base.cmp.summary(), "bic": base.bic(), "where": _where(base.cmp, sensors),
-                     "noise_sigma": target.sigma},
+        "baseline": json.loads((out_dir / "baseline.json").read_text()),
         "causes": causes,
         "named_cause": named,
         "extended_scenario": ext_path.name,

@@ -76,6 +76,9 @@ def test_hidden_effect_is_named_fitted_and_gains(setup, tmp_path, kind, seed):
     result = diagnose(SCENARIO, tmp_path / "passage.csv", tmp_path / "out", validate=validate, progress=False)
 
     named = result["named_cause"]
+    print(f"\n{kind}: truth {effect.as_dict()}; named {named['cause']} {named.get('sleeper', '')} "
+          f"{named['parameters']}; gain {result['gain']['total']:.3f}; validation "
+          f"{[round(v['gain'], 3) for v in result['validation']]}; {result['runs']} runs")
     assert (tmp_path / "out" / "diagnosis.json").is_file() and (tmp_path / "out" / "extended.yaml").is_file()
     assert (tmp_path / "out" / "report.md").is_file()
     if effect.cause == "none":
