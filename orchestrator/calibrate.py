@@ -42,7 +42,8 @@ Each run is one scenario whose ``name`` labels its stage and position
 
 Output folder (``OUT``)::
 
-    OUT/base.yaml                            snapshot of the nominal scenario (what every run loads)
+    OUT/base.yaml, OUT/sensors.yaml          snapshots of the nominal scenario and its sensor layout
+                                             (what every run loads)
     OUT/stage1/, OUT/stage2/, OUT/confirm/   the sweeps (sweep.csv, runs/<id>/result.json)
     OUT/stage2_plan.json                     the narrowed box (reused on resume)
     OUT/calibrated.yaml                      the calibrated scenario
@@ -119,6 +120,7 @@ OBJECTIVE = "objective"  # the run function's scalar that is minimised
 CHANNEL_PREFIX = "nrmse."  # run-function scalars "nrmse.<sensor id>": channel surrogates
 SIGNALS_FILE = "signals.npz"  # the confirmation runs' sensor signals
 BASE_FILE = "base.yaml"  # OUT/base.yaml: the snapshot of the nominal scenario every run loads
+LAYOUT_FILE = "sensors.yaml"  # OUT/sensors.yaml: the snapshot of its sensor layout
 
 
 # ======================================================================================
@@ -835,11 +837,11 @@ def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, 
                              f"(a few hundred for a useful surrogate)")
     raw = scenario.raw
     out.mkdir(parents=True, exist_ok=True)
-    # Every run loads this snapshot, not the user's file: a calibration takes hours, and an edit of the
-    # file meanwhile must not mix two scenarios in one design (a changed file on resume changes the
-    # snapshot, hence the run ids, and the runs are redone).
+    # Every run loads this snapshot (scenario and sensor layout), not the user's files: a calibration takes
+    # long, and an edit of a file meanwhile must not mix two models in one design (a changed file on
+    # resume changes the snapshot, hence the run ids, and the runs are redone).
     snapshot = out / BASE_FILE
-    dump_scenario(scenario, snapshot)
+    scenario = _snapshot(scenario, out)
 
     shift, target = None, None
     if run_fn is None:
@@ -984,6 +986,23 @@ def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, 
     (out / "report.md").write_text(_report(summary))
     return CalibrationResult(plist, dict(zip([p.name for p in plist], v_cal)), np.asarray(u_cal), summary, out,
                              scenario_file, {"stage1": res1, "stage2": res2, "confirm": conf})
+
+
+def _snapshot(scenario, out: Path):
+    """Write ``OUT/base.yaml`` and ``OUT/sensors.yaml`` (its sensor layout); returns the snapshot's scenario."""
+    from .scenario import dump_scenario, scenario_from_dict
+    from .sensor_layout import default_layout_path
+
+    raw = copy.deepcopy(scenario.raw)
+    layout = Path(raw["sensors"]) if raw.get("sensors") else default_layout_path()
+    text = layout.read_text(encoding="utf-8")
+    target = out / LAYOUT_FILE
+    if not target.is_file() or target.read_text(encoding="utf-8") != text:
+        target.write_text(text, encoding="utf-8")
+    raw["sensors"] = str(target.resolve())
+    snap = scenario_from_dict(raw, source=str(out / BASE_FILE), base_dir=out)
+    dump_scenario(snap, out / BASE_FILE)
+    return snap
 
 
 def _best_row(res1, res2, n1: int, i: int) -> dict:

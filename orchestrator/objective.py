@@ -9,7 +9,9 @@ Objective (DESIGN.md §4.3, §5) — a weighted sum over sensor groups of the no
 ``m`` the measurement; ``w_g`` the layout's group weights (default 1 each, so a group
 with six channels counts as much as one with two). Normalising by the channel's
 standard deviation makes pressures [Pa], strains [-] and displacements [m] comparable;
-J = 1 means "no better than the channel's mean".
+J = 1 means "no better than the channel's mean". A channel that is constant over the
+record (a pressure cell over a void reads 0) is normalised by its group's median
+spread instead (:func:`channel_scales`).
 
 Noise level of a measured channel, without any knowledge of the signal: the robust
 spread of the first differences, sigma = 1.4826 MAD(diff m) / sqrt(2) — exact for white
@@ -128,7 +130,7 @@ def on_measured_base(measured, t_sim: np.ndarray, sim: dict, shift: float, types
 
 def compare(measured, t_sim: np.ndarray, sim: dict, groups: dict, weights: dict, sigma: dict,
             shift: float | None = None, max_shift: float | None = None, types: dict | None = None,
-            highpass: float | None = None) -> Comparison:
+            highpass: float | None = None, scale: dict | None = None) -> Comparison:
     """Residuals, nRMSE per channel, J and chi-square of a simulation against a measurement.
 
     Parameters
@@ -158,14 +160,46 @@ def compare(measured, t_sim: np.ndarray, sim: dict, groups: dict, weights: dict,
     if shift is None:
         shift = align(measured, t_sim, {k: sim[k] for k in ids}, max_shift=max_shift)
     on = on_measured_base(measured, t_sim, {k: sim[k] for k in ids}, shift, types, highpass)
-    return score(measured, on, groups, weights, sigma, shift)
+    return score(measured, on, groups, weights, sigma, shift, scale)
 
 
-def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: float = 0.0) -> Comparison:
+def channel_scales(measured, groups: dict) -> tuple[dict, dict]:
+    """Per channel: the nRMSE normaliser (std of the measured signal) and the noise std.
+
+    A channel that is constant over the record (a pressure cell over a void reads 0
+    throughout) has no spread of its own: it is normalised by the median spread of its
+    group (same sensor type, same unit), and its noise level is the group's median
+    noise-to-spread ratio times that. Without this one dead channel would make J
+    infinite and the chi-square undefined.
+
+    Returns
+    -------
+    scale, sigma : dict
+        Sensor id -> [channel unit].
+    """
+    scale, sigma = {}, {}
+    for k, m in measured.channels.items():
+        ok = np.isfinite(m)
+        scale[k] = float(np.std(m[ok])) if ok.sum() > 1 else 0.0
+        sigma[k] = noise_sigma(m)
+    for k in list(scale):
+        peers = [j for j in scale if groups.get(j) == groups.get(k) and scale[j] > 0]
+        if scale[k] <= 0:
+            scale[k] = float(np.median([scale[j] for j in peers])) if peers else 1.0
+        if not (np.isfinite(sigma[k]) and sigma[k] > 0):
+            ratios = [sigma[j] / scale[j] for j in peers if np.isfinite(sigma[j]) and sigma[j] > 0]
+            sigma[k] = scale[k] * (float(np.median(ratios)) if ratios else 0.01)
+    return scale, sigma
+
+
+def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: float = 0.0,
+          scale: dict | None = None) -> Comparison:
     """:class:`Comparison` of a simulation already on the measured time base (``on``: id -> (nt,)).
 
     Used directly where simulations are interpolated between runs (the diagnosis's
-    screening), so they need not be put on the measured base again.
+    screening), so they need not be put on the measured base again. ``scale``: the
+    nRMSE normaliser per channel (:func:`channel_scales`); default the std of the
+    measured channel.
     """
     ids = [k for k in measured.channels if k in on]
     channels, nrmse, residuals = {}, {}, {}
@@ -179,9 +213,9 @@ def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: f
         if n < 2:
             raise ValueError(f"channel {k}: the simulation does not cover the measured passage")
         rmse = float(np.sqrt(np.mean(r[ok] ** 2)))
-        scale = float(np.std(m[ok]))
-        nr = rmse / scale if scale > 0 else float("inf")
-        sg = max(sigma.get(k, np.nan), NOISE_FLOOR * scale) if np.isfinite(sigma.get(k, np.nan)) else scale
+        sc = float(np.std(m[ok])) if scale is None else scale[k]
+        nr = rmse / sc if sc > 0 else float("inf")
+        sg = max(sigma.get(k, np.nan), NOISE_FLOOR * sc) if np.isfinite(sigma.get(k, np.nan)) else sc
         chi2 += float(np.sum((r[ok] / sg) ** 2))
         n_all += n
         j = int(np.nanargmax(np.abs(np.where(ok, r, 0.0))))
@@ -193,7 +227,7 @@ def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: f
     return Comparison(float(shift), channels, gmean, J, chi2, n_all, residuals, on)
 
 
-__all__ = ["Comparison", "Target", "compare", "score", "on_measured_base", "noise_sigma", "objective_from_channels"]
+__all__ = ["Comparison", "Target", "channel_scales", "compare", "score", "on_measured_base", "noise_sigma", "objective_from_channels"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -208,18 +242,21 @@ class Target:
     measured : orchestrator.measured.MeasuredData
     layout : orchestrator.sensor_layout.SensorLayout
     sigma : dict
-        Sensor id -> noise std estimated from the measurement (:func:`noise_sigma`).
+        Sensor id -> noise std estimated from the measurement (:func:`channel_scales`).
     shift : float or None
         Time alignment [s], fixed once by :meth:`align_to` and then held for every
         variant: the instants of a passage are set by geometry and speed, not by the
         track's stiffness, voids or nose wear, and a shift re-fitted per variant would
         soak up part of the very differences the diagnosis looks for.
+    scale : dict or None
+        Sensor id -> the nRMSE normaliser (:func:`channel_scales`).
     """
 
     measured: object
     layout: object
     sigma: dict
     shift: float | None = None
+    scale: dict | None = None
 
     @classmethod
     def read(cls, path, layout) -> "Target":
@@ -227,7 +264,8 @@ class Target:
         from .measured import read_measured
 
         data = read_measured(path, layout.types)
-        return cls(data, layout, {k: noise_sigma(v) for k, v in data.channels.items()})
+        scale, sigma = channel_scales(data, layout.groups)
+        return cls(data, layout, sigma, scale=scale)
 
     def align_to(self, t_sim: np.ndarray, sim: dict) -> float:
         """Fix :attr:`shift` from a simulation (its accelerometer channels when it has any).
@@ -250,12 +288,12 @@ class Target:
             self.align_to(t_sim, sim)
         lay = self.layout
         return compare(self.measured, t_sim, sim, lay.groups, lay.weights, self.sigma, shift=self.shift,
-                       types=lay.types, highpass=lay.displacement_highpass)
+                       types=lay.types, highpass=lay.displacement_highpass, scale=self.scale)
 
     def score(self, on: dict) -> Comparison:
         """:func:`score` of signals already on the measured time base."""
         lay = self.layout
-        return score(self.measured, on, lay.groups, lay.weights, self.sigma, self.shift or 0.0)
+        return score(self.measured, on, lay.groups, lay.weights, self.sigma, self.shift or 0.0, self.scale)
 
     def weighted_residuals(self, cmp: Comparison) -> np.ndarray:
         """One vector whose sum of squares is ``sum_g w_g mean_{i in g} nRMSE_i^2 / sum_g w_g``.
@@ -272,7 +310,7 @@ class Target:
         for k, info in cmp.channels.items():
             m = self.measured.channels[k]
             ok = np.isfinite(cmp.residuals[k])
-            scale = float(np.std(m[ok])) or 1.0
+            scale = self.scale[k] if self.scale is not None else (float(np.std(m[ok])) or 1.0)
             g = lay.groups[k]
             f = np.sqrt(lay.weights.get(g, 1.0) / (wsum * members[g] * ok.sum())) / scale
             parts.append(np.where(ok, cmp.residuals[k], 0.0) * f)
