@@ -6,14 +6,25 @@ Anything else is a bug and keeps its traceback.
 """
 from __future__ import annotations
 
+import difflib
 import re
+from typing import Iterable
 
-__all__ = ["UserInputError", "ScenarioError", "one_line"]
+__all__ = ["UserInputError", "ScenarioError", "one_line", "did_you_mean"]
 
 
 def one_line(text: object) -> str:
     """``str(text)`` with every line break (and the blanks around it) folded into one space."""
     return re.sub(r"\s*[\r\n]+\s*", " ", str(text)).strip()
+
+
+def did_you_mean(word: object, choices: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``choices`` (case-insensitive match first), or ''."""
+    choices = [str(c) for c in choices]
+    word = str(word)
+    lowered = {c.lower(): c for c in choices}
+    match = lowered.get(word.lower()) or next(iter(difflib.get_close_matches(word, choices, n=1, cutoff=0.6)), None)
+    return f" (did you mean {match!r}?)" if match else ""
 
 
 class UserInputError(ValueError):

@@ -89,7 +89,6 @@ measurement generator and the tests).
 from __future__ import annotations
 
 import csv
-import difflib
 import io
 import math
 import re
@@ -101,7 +100,7 @@ import numpy as np
 
 from track.sensors import SENSOR_TYPES   # the one list of sensor types (DESIGN §4.3)
 
-from .errors import UserInputError
+from .errors import UserInputError, did_you_mean as _hint
 
 __all__ = [
     "SENSOR_TYPES",
@@ -534,13 +533,6 @@ def _check_layout(sensors: Mapping[str, str], name: str) -> None:
                                  f"expected one of {', '.join(SENSOR_TYPES)}")
         if sid == "time":
             raise UserInputError(f"{name}: 'time' cannot be a sensor id")
-
-
-def _hint(word: str, choices: Sequence[str]) -> str:
-    match = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    if not match:
-        match = [c for c in choices if c.lower() == word.lower()][:1]
-    return f" (did you mean {match[0]!r}?)" if match else ""
 
 
 def _as_vector(values, name: str, col: str) -> np.ndarray:

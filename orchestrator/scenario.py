@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import difflib
 import math
 import numbers
 import os
@@ -42,6 +41,7 @@ from track.params import (
 )
 
 from .errors import ScenarioError, UserInputError
+from .errors import did_you_mean as _hint
 
 __all__ = [
     "PortMap",
@@ -242,13 +242,6 @@ def _describe(value: Any) -> str:
     if isinstance(value, numbers.Number):
         return repr(value)
     return f"a {type(value).__name__}"
-
-
-def _hint(word: str, choices: Iterable[str]) -> str:
-    choices = list(choices)
-    lowered = {c.lower(): c for c in choices}
-    match = lowered.get(word.lower()) or next(iter(difflib.get_close_matches(word, choices, n=1, cutoff=0.6)), None)
-    return f" (did you mean {match!r}?)" if match else ""
 
 
 # --------------------------------------------------------------------------------------

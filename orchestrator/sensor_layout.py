@@ -22,7 +22,6 @@ objects for a given track model. The default layout is
 """
 from __future__ import annotations
 
-import difflib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +31,7 @@ import numpy as np
 from track.model import TrackModel
 from track.sensors import GAUGE_LENGTH, RECONSTRUCTION_HIGHPASS, SENSOR_TYPES, Sensor
 
-from .errors import UserInputError
+from .errors import UserInputError, did_you_mean as _hint
 from .scenario import read_yaml
 
 DEFAULT_LAYOUT = "in2track_like.yaml"
@@ -75,11 +74,6 @@ def default_layout_path() -> Path:
 
 def _err(source: str, key: str, message: str) -> UserInputError:
     return UserInputError(f"{source}: {key}: {message}")
-
-
-def _hint(word: str, choices) -> str:
-    match = difflib.get_close_matches(str(word), list(choices), n=1, cutoff=0.6)
-    return f" (did you mean {match[0]!r}?)" if match else ""
 
 
 def _positive(source: str, key: str, value) -> float:

@@ -489,17 +489,7 @@ def test_crossing_nose_geometry():
 
 def _area_outside(vertices, z0, b):
     """Area of the polygon part with z >= z0 and |y| >= b (Sutherland-Hodgman clipping)."""
-    def clip(P, inside, cut):
-        out = []
-        for i in range(len(P)):
-            a, c = P[i - 1], P[i]
-            if inside(c):
-                if not inside(a):
-                    out.append(cut(a, c))
-                out.append(c)
-            elif inside(a):
-                out.append(cut(a, c))
-        return out
+    from track.solid.crossing import _clip
 
     def cut_y(y):
         return lambda a, c: (y, a[1] + (c[1] - a[1]) * (y - a[0]) / (c[0] - a[0]))
@@ -509,8 +499,8 @@ def _area_outside(vertices, z0, b):
 
     total = 0.0
     for sgn in (1.0, -1.0):
-        P = clip([tuple(v) for v in vertices], lambda p: p[1] >= z0, cut_z)
-        P = clip(P, lambda p: sgn * p[0] >= b, cut_y(sgn * b))
+        P = _clip([tuple(v) for v in vertices], lambda p: p[1] >= z0, cut_z)
+        P = _clip(P, lambda p: sgn * p[0] >= b, cut_y(sgn * b))
         if len(P) >= 3:
             Q = np.array(P)
             total += 0.5 * abs(np.dot(Q[:, 0], np.roll(Q[:, 1], -1)) - np.dot(Q[:, 1], np.roll(Q[:, 0], -1)))
