@@ -49,14 +49,19 @@ def _positive_float(text: str) -> float:
     return x
 
 
-def _positive_int(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
-    return n
+def _int_at_least(least: int):
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if n < least:
+            raise argparse.ArgumentTypeError(f"must be >= {least}, got {text!r}")
+        return n
+    return parse
+
+
+_positive_int = _int_at_least(1)
 
 
 def _point(text: str) -> str:
@@ -155,7 +160,8 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Calibrate parameters of SCENARIO against a measurement (DESIGN.md section 5): "
                                      "Latin hypercube, thin-plate-spline response surface (smoothing by "
                                      "cross-validation), sensitivity -> narrowed bounds, second hypercube + corners, "
-                                     "bounded trust-constr optimisation with multistart, confirmation run. Writes "
+                                     "bounded trust-constr optimisation with multistart, confirmation run, then a "
+                                     "least-squares polish on real runs. Writes "
                                      "calibrated.yaml, calibration.json, report.md and plots into DIR. Resumable: "
                                      "the same command again does only the unfinished runs.")
     cal.add_argument("scenario", metavar="SCENARIO", type=Path, help="nominal scenario YAML file")
@@ -172,6 +178,8 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--n2", metavar="N", type=_positive_int, default=500,
                      help="runs of the second hypercube in the narrowed bounds (default 500; plus 2^k corners)")
     cal.add_argument("--seed", metavar="S", type=int, default=0, help="seed of the designs and starts (default 0)")
+    cal.add_argument("--polish", metavar="N", type=_int_at_least(0), default=15,
+                     help="least-squares iterations on real runs after the surrogate optimum (default 15; 0: none)")
     _add_executor_options(cal)
     cal.set_defaults(handler=_cmd_calibrate)
 
@@ -297,7 +305,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     try:
         result = calibration.calibrate(args.scenario, args.measured, out_dir, params=args.params, n1=args.n1,
                                        n2=args.n2, seed=args.seed, workers=args.workers, scheduler=args.scheduler,
-                                       progress=not args.no_progress)
+                                       progress=not args.no_progress, polish=args.polish)
     except calibration.CalibrationIncomplete as exc:
         print(f"{PROG}: error: {one_line(exc)}", file=sys.stderr)
         return EXIT_INCOMPLETE

@@ -21,7 +21,8 @@ The procedure (DESIGN.md §4.5; every threshold is a named constant below):
    its own, then get all their parameters fitted
    (a void's six gaps; the other causes have one) by bounded least squares
    (:func:`scipy.optimize.least_squares`, ``trf``) on the weighted, normalised
-   residuals, with the finite-difference Jacobian's runs done in parallel.
+   residuals, with the finite-difference Jacobian's runs done in parallel
+   (:func:`orchestrator.fitting.fit_unit_cube`).
 5. **Ranking and naming.** Each candidate's evidence: its objective, the reduction of
    the objective, chi-square and the Bayesian information criterion
    BIC = chi2 + k ln N (k fitted parameters, N samples). The named cause is the
@@ -61,7 +62,6 @@ FIT_RATIO = 2.0      # ... of those whose confirmed chi-square is within this fa
 DENSE = 121          # points of the 1-D search between screening runs
 FIT_MAX_NFEV = 5     # least-squares iterations of a coarse fit (each: one run + a parallel Jacobian) ...
 FINE_MAX_NFEV = 8    # ... and of the fine stages (six gaps)
-FIT_STEP = 0.02      # finite-difference step in the unit parameter cube
 SENSOR_REACH = 0     # local causes on the sleepers carrying sensors +- this many
 
 
@@ -186,7 +186,7 @@ def _stages(kind) -> list:
 def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated, stages: slice = slice(None),
          max_nfev: int = FIT_MAX_NFEV) -> Evaluated:
     """A candidate's parameters by bounded least squares, through ``_stages(kind)[stages]`` (module doc, step 4)."""
-    from scipy.optimize import least_squares
+    from .fitting import fit_unit_cube
 
     c = start.candidate
     kind = kind_of(c)
@@ -204,22 +204,12 @@ def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated, stages: slice
     k = start.k
     for n, to_u in _stages(kind)[stages]:
         k = n
-        def fun(p, to_u=to_u):
-            return target.weighted_residuals(runs([np.clip(to_u(p), 0.0, 1.0)])[0])
 
-        def jac(p, to_u=to_u):
-            p = np.asarray(p, float)
-            steps = []
-            for i in range(p.size):
-                dp = np.zeros_like(p)
-                dp[i] = FIT_STEP if p[i] + FIT_STEP <= 1.0 else -FIT_STEP
-                steps.append((p + dp, dp[i]))
-            cmps = runs([np.clip(to_u(q), 0.0, 1.0) for q, _ in steps])
-            r0 = fun(p)
-            return np.column_stack([(target.weighted_residuals(cm) - r0) / d for cm, (_, d) in zip(cmps, steps)])
+        def batch(ps, to_u=to_u):
+            return [target.weighted_residuals(cm) for cm in runs([np.clip(to_u(p), 0.0, 1.0) for p in ps])]
 
         p0 = u_best[[0, -1]] if n == 2 else u_best   # the wedge starts from the current ends
-        least_squares(fun, np.clip(p0, 0.0, 1.0), jac=jac, bounds=(0.0, 1.0), method="trf", max_nfev=max_nfev)
+        fit_unit_cube(batch, p0, max_nfev=max_nfev)
         u_best = np.frombuffer(min(cache, key=lambda b: cache[b].chi2), dtype=float).copy()
     best = cache[u_best.tobytes()]
     if best.chi2 > start.cmp.chi2:   # the fit never did better than its start

@@ -579,7 +579,7 @@ def _one_line_error(exc: BaseException) -> str:
 
 def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, Any]], out_dir: str | os.PathLike,
               run_fn: Callable | None = None, workers: int = 2, scheduler: str | None = None,
-              progress: bool = True) -> SweepResult:
+              progress: bool = True, executor: cf.Executor | None = None) -> SweepResult:
     """Run (or resume) a sweep; write ``OUT/runs/*``, ``OUT/sweep.csv`` and the plots.
 
     Parameters
@@ -600,6 +600,10 @@ def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, An
         A Dask scheduler address; the runs go to that cluster instead.
     progress : bool
         Show a progress bar.
+    executor : concurrent.futures.Executor, optional
+        An executor to run on instead of a new one (``workers`` and ``scheduler`` are then
+        not used); it is left running. For callers that run many small sweeps in a row
+        (a fit's iterations), so that the workers and what they cache are kept.
 
     Returns
     -------
@@ -616,7 +620,7 @@ def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, An
         did not finish. Finished runs are on disk: the same call resumes.
     """
     plan = plan_sweep(base_path, variations)
-    if scheduler is None:
+    if scheduler is None and executor is None:
         _check_workers(workers)
     if run_fn is not None:
         try:
@@ -643,7 +647,9 @@ def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, An
         from tqdm import tqdm
 
         # No more local processes than runs: each spawned worker pays the imports.
-        executor = make_executor(workers if scheduler else min(workers, len(todo)), scheduler)
+        own = executor is None
+        if own:
+            executor = make_executor(workers if scheduler else min(workers, len(todo)), scheduler)
         bar = tqdm(total=len(todo), desc="sweep", unit="run", disable=not progress)
         clean = False
         try:
@@ -674,7 +680,11 @@ def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, An
             clean = True
         finally:
             bar.close()
-            executor.shutdown(wait=clean, cancel_futures=not clean)
+            if own:
+                executor.shutdown(wait=clean, cancel_futures=not clean)
+            elif not clean:
+                for future in futures:
+                    future.cancel()
 
     rows = _rows(plan, records)
     write_table(rows, table)
