@@ -369,6 +369,9 @@ class CosimResult:
         Steps, wall time and its split, backend, algorithm.
     error : str or None
         Why the run stopped early (the arrays hold what was computed).
+    track_model : track.model.TrackModel or None
+        The in-process backend's track model (for post-processing without building it
+        again); ``None`` with FMUs.
     """
 
     t: np.ndarray
@@ -381,6 +384,7 @@ class CosimResult:
     track_record: dict | None = None
     stats: dict = field(default_factory=dict)
     error: str | None = None
+    track_model: object = None
 
 
 def vehicle_kind(scenario) -> str:
@@ -594,4 +598,5 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
         tmp.cleanup()
     sl = slice(0, done)
     return CosimResult(t=T[sl], x=X[sl], z=Z[sl], vz=VZ[sl], Fz=F[sl], parts=P[sl], rail_z=RZ[sl],
-                       track_record=record, stats=stats, error=error)
+                       track_record=record, stats=stats, error=error,
+                       track_model=track.model if backend == "inprocess" else None)

@@ -86,7 +86,7 @@ def simulate_sensors(scenario, layout: SensorLayout | None = None, reconstruct: 
 
     layout = layout_of(scenario) if layout is None else layout
     res = run_cosim(scenario, backend="inprocess", record_states=True)
-    model = build_track(scenario.track)
+    model = res.track_model
     compiled = compile_sensors(model, resolve(layout, model))
     rec = res.track_record
     t = np.asarray(rec["t"], float)
