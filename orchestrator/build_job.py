@@ -18,16 +18,12 @@ scenario names must fit.
 """
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 from .master import INPUTS_AT_START, n_wheels
 from .sensing import scenario_sensors
 
 VEHICLE_KINDS = ("bogie", "quarter")
-log = logging.getLogger(__name__)
-
-
 
 
 def build_fmus(scenario, out_dir: Path) -> dict[str, Path]:

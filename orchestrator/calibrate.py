@@ -784,23 +784,29 @@ class CalibrationResult:
 def _stage(base_path, points: np.ndarray, raw: dict, params, label: str, out: Path, run_fn, workers, scheduler,
            progress, executor=None) -> tuple[np.ndarray, dict, Any]:
     """Run one stage's points; returns (rows' objective (n,), channel values {id: (n,)}, SweepResult)."""
-    from .sweep import SweepIncomplete, run_sweep
-
     name = raw["name"]
     variations = [_variation(raw, params, _values(params, u), f"{name}-{label}-{i:04d}") for i, u in enumerate(points)]
-    try:
-        res = run_sweep(base_path, variations, out, run_fn=run_fn, workers=workers, scheduler=scheduler,
-                        progress=progress, executor=executor)
-    except SweepIncomplete as exc:
-        raise CalibrationIncomplete(f"calibration stage {label}: {exc}") from None
-    if res.failed:
-        raise CalibrationIncomplete(f"calibration stage {label}: {res.summary()}")
+    res = _sweep(base_path, variations, out, f"stage {label}", run_fn=run_fn, workers=workers, scheduler=scheduler,
+                 progress=progress, executor=executor)
     by_index = {row["index"]: row for row in res.rows}
     y = np.array([_float(by_index[i].get(OBJECTIVE)) for i in range(len(points))])
     channels = sorted({c for row in res.rows for c in row if c.startswith(CHANNEL_PREFIX)})
     ch = {c[len(CHANNEL_PREFIX):]: np.array([_float(by_index[i].get(c)) for i in range(len(points))])
           for c in channels}
     return y, ch, res
+
+
+def _sweep(base_path, variations, out: Path, what: str, **kw):
+    """:func:`orchestrator.sweep.run_sweep`; unfinished or failed runs raise :class:`CalibrationIncomplete`."""
+    from .sweep import SweepIncomplete, run_sweep
+
+    try:
+        res = run_sweep(base_path, variations, out, **kw)
+    except SweepIncomplete as exc:
+        raise CalibrationIncomplete(f"calibration {what}: {exc}") from None
+    if res.failed:
+        raise CalibrationIncomplete(f"calibration {what}: {res.summary()}")
+    return res
 
 
 def _float(v) -> float:
@@ -902,10 +908,8 @@ def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, 
             raise UserInputError(f"{base_path}: the nominal scenario does not run to the end ({nominal.error})")
         shift = float(target.align_to(nominal.t, nominal.signals))
         run_fn = functools.partial(objective_run, measured=str(measured.resolve()), shift=shift)
-        confirm_fn = functools.partial(objective_run, measured=str(measured.resolve()), shift=shift,
-                                       save_signals=True)
-        polish_fn = functools.partial(objective_run, measured=str(measured.resolve()), shift=shift,
-                                      save_residuals=True)
+        confirm_fn = functools.partial(run_fn, save_signals=True)
+        polish_fn = polish_fn or functools.partial(run_fn, save_residuals=True)
     else:
         confirm_fn = run_fn
     common = dict(run_fn=run_fn, workers=workers, scheduler=scheduler, progress=progress)
@@ -956,15 +960,8 @@ def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, 
     v_opt = _values(plist, u_opt)
     conf_vars = [{"name": f"{raw['name']}-nominal"},
                  _variation(raw, plist, v_opt, f"{raw['name']}-calibrated")]
-    from .sweep import SweepIncomplete, run_sweep
-
-    try:
-        conf = run_sweep(snapshot, conf_vars, out / "confirm", run_fn=confirm_fn, workers=workers,
-                         scheduler=scheduler, progress=False)
-    except SweepIncomplete as exc:
-        raise CalibrationIncomplete(f"calibration confirmation: {exc}") from None
-    if conf.failed:
-        raise CalibrationIncomplete(f"calibration confirmation: {conf.summary()}")
+    conf = _sweep(snapshot, conf_vars, out / "confirm", "confirmation", run_fn=confirm_fn, workers=workers,
+                  scheduler=scheduler, progress=False)
     rows = {r["index"]: r for r in conf.rows}
     j_before, j_confirmed = _float(rows[0].get(OBJECTIVE)), _float(rows[1].get(OBJECTIVE))
     i_best = int(np.nanargmin(y))
@@ -1074,7 +1071,7 @@ def _polish(snapshot: Path, raw: dict, params, starts: dict, out: Path, polish_f
     from tqdm import tqdm
 
     from .fitting import fit_unit_cube
-    from .sweep import SweepIncomplete, make_executor
+    from .sweep import make_executor
 
     t0 = time.perf_counter()
     found: dict[bytes, tuple[float, dict]] = {}
@@ -1083,21 +1080,19 @@ def _polish(snapshot: Path, raw: dict, params, starts: dict, out: Path, polish_f
     fits, per_start = {}, {}
     names = [p.name for p in params]
     try:
-        for label, u0 in starts.items():
-            if any(np.allclose(u0, v) for v in list(starts.values())[:list(starts).index(label)]):
+        items = list(starts.items())
+        for n, (label, u0) in enumerate(items):
+            if any(np.allclose(u0, v) for _, v in items[:n]):
                 continue
             folder = out / label.replace(" ", "_")
-            first: list[np.ndarray] = []
+            first: list[np.ndarray] = []  # the start's residuals
 
-            def batch(ps: list[np.ndarray], folder=folder, first=first) -> list[np.ndarray]:
-                b = batch.calls[folder]  # the iteration is deterministic: call b of a rerun is call b before
-                batch.calls[folder] += 1
-                try:
-                    res = _stage(snapshot, np.asarray(ps), raw, params, f"pol-{folder.name}-{b:03d}",
-                                 folder / f"b{b:03d}", run_fn=polish_fn, workers=workers, scheduler=scheduler,
-                                 progress=False, executor=executor)[2]
-                except CalibrationIncomplete as exc:
-                    raise CalibrationIncomplete(f"calibration polish: {exc}") from None
+            # the iteration is deterministic: call b of a rerun is call b before, and finds its runs on disk
+            def batch(ps: list[np.ndarray], folder=folder, first=first, calls=itertools.count()) -> list[np.ndarray]:
+                b = next(calls)
+                res = _stage(snapshot, np.asarray(ps), raw, params, f"pol-{folder.name}-{b:03d}", folder / f"b{b:03d}",
+                             run_fn=polish_fn, workers=workers, scheduler=scheduler, progress=False,
+                             executor=executor)[2]
                 bar.update(len(ps))
                 by_index = {row["index"]: row for row in res.rows}
                 rs = []
@@ -1117,15 +1112,12 @@ def _polish(snapshot: Path, raw: dict, params, starts: dict, out: Path, polish_f
                     rs.append(r)
                 return rs
 
-            batch.calls = {folder: 0}
             fit = fit_unit_cube(batch, u0, max_nfev=max_nfev)
             fits[label] = fit
             per_start[label] = {"u0": dict(zip(names, map(float, np.clip(u0, 0, 1)))),
                                 "u": dict(zip(names, map(float, fit.p))), "cost_start": fit.cost_start,
                                 "cost": fit.cost, "objective": found[fit.p.tobytes()][0], "runs": fit.evaluations,
                                 "iterations": fit.batches}
-    except SweepIncomplete as exc:
-        raise CalibrationIncomplete(f"calibration polish: {exc}") from None
     finally:
         bar.close()
         executor.shutdown()

@@ -488,20 +488,20 @@ def test_crossing_nose_geometry():
 
 
 def _area_outside(vertices, z0, b):
-    """Area of the polygon part with z >= z0 and |y| >= b (Sutherland-Hodgman clipping)."""
-    from track.solid.crossing import _clip
+    """Area of the polygon part with z >= z0 and |y| >= b.
 
-    def cut_y(y):
-        return lambda a, c: (y, a[1] + (c[1] - a[1]) * (y - a[0]) / (c[0] - a[0]))
+    Clipped by matplotlib's polygon clipper (``Path.clip_to_bbox``), not by the crossing's
+    own ``_clip``: the reference must not share the code it checks.
+    """
+    from matplotlib.path import Path as MplPath
+    from matplotlib.transforms import Bbox
 
-    def cut_z(a, c):
-        return (a[0] + (c[0] - a[0]) * (z0 - a[1]) / (c[1] - a[1]), z0)
-
+    V = np.asarray(vertices, float)
+    big = 10.0 * np.abs(V).max() + 1.0
+    polygon = MplPath(np.vstack([V, V[:1]]), closed=True)
     total = 0.0
-    for sgn in (1.0, -1.0):
-        P = _clip([tuple(v) for v in vertices], lambda p: p[1] >= z0, cut_z)
-        P = _clip(P, lambda p: sgn * p[0] >= b, cut_y(sgn * b))
-        if len(P) >= 3:
-            Q = np.array(P)
+    for box in (Bbox([[b, z0], [big, big]]), Bbox([[-big, z0], [-b, big]])):
+        Q = polygon.clip_to_bbox(box, inside=True).vertices
+        if len(Q) >= 3:
             total += 0.5 * abs(np.dot(Q[:, 0], np.roll(Q[:, 1], -1)) - np.dot(Q[:, 1], np.roll(Q[:, 0], -1)))
     return total
