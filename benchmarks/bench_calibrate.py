@@ -3,7 +3,7 @@
 A synthetic measurement of the measurement scenario (quarter vehicle over the 1:12
 crossing, 120 km/h; default sensor layout) is made with hidden parameters: a ballast void
 under the crossing transition sleeper (6 gaps), the ballast stiffness scale h1 and the
-rail-pad stiffness scale h2, 1 % noise (synthetic.DEFAULT_NOISE). ``orchestrator.calibrate.calibrate`` then runs
+rail-pad stiffness scale h2, 1 % noise (synthetic.DEFAULT_NOISE). ``orchestrator.inverse.calibrate.calibrate`` then runs
 500 + 500 + 2^8 = 1256 simulations on 2 local worker processes (target: <= 30 min), the
 confirmation runs and the least-squares polish. Printed and appended to
 benchmarks/RESULTS.md: wall time (and the polish's share), runs/s, CV errors, recovered vs
@@ -22,9 +22,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from orchestrator import calibrate as cal
-from orchestrator.scenario import bundled_scenario, load_scenario, scenario_from_dict
-from orchestrator.synthetic import Effect, synthesize
+from orchestrator.inverse import calibrate as cal
+from orchestrator.inputs.scenario import bundled_scenario, load_scenario, scenario_from_dict
+from orchestrator.inverse.synthetic import Effect, synthesize
 
 SCENARIO = "measurement/crossing_quarter_120.yaml"
 # Hidden truth: a void hump under the transition sleeper (0-0.9 mm, inside seed 000's 0-2.3 mm),

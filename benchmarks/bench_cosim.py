@@ -22,8 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from orchestrator.master import run_cosim
-from orchestrator.scenario import load_scenario
+from orchestrator.cosim.master import run_cosim
+from orchestrator.inputs.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT / "scenarios" / "crossing_1_12_through_120.yaml"
@@ -56,7 +56,7 @@ def main() -> None:
             if args.quick:
                 over = over + ["simulation.duration=0.05"]
             sc = load_scenario(DEFAULT, over)
-            from orchestrator.build_job import build_fmus
+            from orchestrator.cosim.build_job import build_fmus
             fmu_dir = Path(tmp) / label.replace(" ", "_")
             build_fmus(sc, fmu_dir)
             from track.model import build_track
@@ -79,7 +79,7 @@ def main() -> None:
     except ImportError:
         print("libcosimpy not installed: the libcosim comparison is skipped")
     if lib:
-        from orchestrator.ssp import export_ssp, run_ssp_libcosim
+        from orchestrator.cosim.ssp import export_ssp, run_ssp_libcosim
         over = ["simulation.algorithm=jacobi"] + (["simulation.duration=0.05"] if args.quick else [])
         sc = load_scenario(DEFAULT, over)
         with tempfile.TemporaryDirectory() as tmp:
@@ -89,7 +89,7 @@ def main() -> None:
                                    output_every=sc.simulation.output_every)
             t_lib = time.perf_counter() - t0
             fmu_dir = Path(tmp) / "fmus"
-            from orchestrator.build_job import build_fmus
+            from orchestrator.cosim.build_job import build_fmus
             build_fmus(sc, fmu_dir)
             t0 = time.perf_counter()
             r = run_cosim(sc, backend="fmu", fmu_dir=fmu_dir, record_states=False)

@@ -7,7 +7,7 @@ Two parts (issue: measurement loop):
    layout) with a hidden void, diagnosed with 2 local workers; prints the wall time,
    the number of runs and what was found.
 2. ``--part confusion``: many seeded hidden effects (every kind of
-   :data:`orchestrator.synthetic.HIDDEN_KINDS` and ``none``) on the measurement scenario
+   :data:`orchestrator.inverse.synthetic.HIDDEN_KINDS` and ``none``) on the measurement scenario
    (scenarios/measurement/crossing_quarter_120.yaml); prints the confusion matrix
    (true kind x named cause), the share with the right sleeper (exact or within an
    ambiguity set of <= 2) and the gains.
@@ -28,11 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.diagnose import diagnose
-from orchestrator.scenario import bundled_scenario, load_scenario
-from orchestrator.sensing import layout_of
-from orchestrator.sensor_layout import resolve
-from orchestrator.synthetic import HIDDEN_KINDS, hidden_effect, synthesize
+from orchestrator.inverse.diagnose import diagnose
+from orchestrator.inputs.scenario import bundled_scenario, load_scenario
+from orchestrator.inputs.sensor_layout import layout_of
+from orchestrator.inputs.sensor_layout import resolve
+from orchestrator.inverse.synthetic import HIDDEN_KINDS, hidden_effect, synthesize
 from track.model import build_track
 
 

@@ -1,6 +1,6 @@
 """The whole seed-001 study (issue: parameter studies): 6 speeds x 3 impact angles x 2 pads.
 
-Runs `orchestrator.figures.make_figures(study="seed001")` into a fresh folder with 2 local
+Runs `orchestrator.studies.figures.make_figures(study="seed001")` into a fresh folder with 2 local
 worker processes (target: <= 15 min on this 2-core machine), prints and appends the wall
 time, the number of runs and the figures written to benchmarks/RESULTS.md.
 
@@ -16,7 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from orchestrator.figures import ANGLES, PADS, SPEEDS_KMH, make_figures
+from orchestrator.studies.figures import ANGLES, PADS, SPEEDS_KMH, make_figures
 
 
 def main() -> None:

@@ -20,8 +20,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from orchestrator.master import run_cosim
-from orchestrator.scenario import load_scenario
+from orchestrator.cosim.master import run_cosim
+from orchestrator.inputs.scenario import load_scenario
 from track.model import build_track
 from track.solid.crossing import clear_solid_cache
 

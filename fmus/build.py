@@ -77,7 +77,7 @@ from {package}.{module} import {class_name}
 '''
 
 TRACK_DEFAULT_WHEELS = 4  # build_fmu("track"): default track, wheels of the default vehicle (bogie);
-                          # no sensors (resolving a layout needs orchestrator.sensor_layout: build_job)
+                          # no sensors (resolving a layout needs orchestrator.inputs.sensor_layout: build_job)
 
 
 def _default_track_resources() -> Dict[str, bytes]:
@@ -167,8 +167,8 @@ def build_track_fmu(track_params, n_wheels: int, out_dir: str | Path, name: str 
     name : str
         File name of the FMU without ``.fmu``.
     sensors : sequence of track.sensors.Sensor
-        Sensors resolved on a model of ``track_params`` (``orchestrator.sensor_layout.resolve``;
-        ``orchestrator.build_job`` does it for a scenario), baked into the same resource
+        Sensors resolved on a model of ``track_params`` (``orchestrator.inputs.sensor_layout.resolve``;
+        ``orchestrator.cosim.build_job`` does it for a scenario), baked into the same resource
         file: one output per sensor (``fmus.track_fmu``).  Empty: no sensor outputs.
     **defaults
         Start values of the run parameters: ``speed`` [m/s], ``static_wheel_load``

@@ -50,8 +50,8 @@ lazy-construction flag; recorded samples are not part of it (a restore truncates
 the record to the restored length).
 
 Sensor outputs: the sensors are resolved on the scenario's track at build time
-(``orchestrator.build_job``: the scenario's ``sensors:`` layout or the default one,
-``orchestrator.sensor_layout.resolve``) and baked into ``track_fmu.json`` as a list of
+(``orchestrator.cosim.build_job``: the scenario's ``sensors:`` layout or the default one,
+``orchestrator.inputs.sensor_layout.resolve``) and baked into ``track_fmu.json`` as a list of
 ``track.sensors.Sensor`` (body name, coordinate, ...), so the FMU reads no layout file at
 run time.  Their rows (``track.sensors.compile_sensors``) are compiled on the model
 whenever it is (re)built, since h1, h2, voids, ... change the ballast bushings but not the
@@ -61,7 +61,7 @@ under the sensor (``model.ballast.pressure``), acceleration and strain from the 
 the accelerations and the displacements.  A displacement sensor outputs the displacement
 itself (its ``displacement_row`` on q): the field team reconstructs displacements from
 the accelerometer with a zero-phase high-pass (``track.sensors.displacement_from_acceleration``),
-which no causal FMU can apply; the offline pipeline (``orchestrator.sensing``, from the
+which no causal FMU can apply; the offline pipeline (``orchestrator.cosim.sensing``, from the
 recorded states) applies it to the accelerometer signal over the whole record, and a host
 of this FMU can do the same with the output ``<id>_acc``.  The
 values are computed from the rows restricted to their non-zero columns (:class:`SensorReader`:
@@ -117,7 +117,7 @@ def resource_payload(params: "_params.TrackParams", n_wheels: int, sensors: Sequ
     n_wheels : int
         Number of wheels (bogie 4, quarter vehicle 2).
     sensors : sequence of track.sensors.Sensor
-        The sensors, resolved on a model of ``params`` (``orchestrator.sensor_layout.resolve``);
+        The sensors, resolved on a model of ``params`` (``orchestrator.inputs.sensor_layout.resolve``);
         one output each (see the module docstring).  Empty: no sensor outputs.
     **defaults
         Defaults of the run parameters, keys of :data:`RUN_DEFAULTS`: ``speed`` [m/s],

@@ -1,6 +1,6 @@
 """Orchestrator: scenarios, co-simulation master, recording, command line.
 
-Entry points: :func:`orchestrator.scenario.load_scenario` and the ``turnout``
+Entry points: :func:`orchestrator.inputs.scenario.load_scenario` and the ``turnout``
 command (:func:`orchestrator.cli.main`).
 """
 from importlib.metadata import PackageNotFoundError, version

@@ -1,25 +1,24 @@
 """The ``turnout`` command line: parses arguments and delegates to the orchestrator's jobs
-(:mod:`orchestrator.jobs`, ``build_job``, ``ssp``, ``sweep``, ``figures``, ``calibrate``,
+(:mod:`orchestrator.results.jobs`, ``build_job``, ``ssp``, ``sweep``, ``figures``, ``calibrate``,
 ``diagnose``, ``synthetic``).
 
 No logic lives here (as in FMPy's ``command_line.py``). User errors
-(:class:`~orchestrator.errors.UserInputError`, which includes
-:class:`~orchestrator.errors.ScenarioError`, and unusable files or folders)
+(:class:`~orchestrator.inputs.errors.UserInputError`, which includes
+:class:`~orchestrator.inputs.errors.ScenarioError`, and unusable files or folders)
 are printed as one line ``turnout: error: ...`` and give exit status 2;
 set ``TURNOUT_DEBUG=1`` to get the traceback of an OSError instead.
 """
 from __future__ import annotations
 
 import argparse
-import importlib
 import math
 import os
 import sys
 from pathlib import Path
 from typing import Sequence
 
-from . import __version__
-from .errors import UserInputError, one_line
+from orchestrator import __version__
+from orchestrator.inputs.errors import UserInputError, one_line
 
 PROG = "turnout"
 EXIT_USAGE = 2  # bad input (also argparse's status for usage errors)
@@ -85,7 +84,7 @@ def _add_scenario_args(p: argparse.ArgumentParser) -> None:
 
 
 def _add_executor_options(p: argparse.ArgumentParser) -> None:
-    """--workers, --scheduler, --no-progress: where the runs of a study go (orchestrator.sweep)."""
+    """--workers, --scheduler, --no-progress: where the runs of a study go (orchestrator.sweeps.sweep)."""
     p.add_argument("--workers", metavar="N", type=_positive_int, default=2,
                    help="local worker processes (default: 2; ignored with --scheduler)")
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -225,11 +224,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _jobs():
     # Imported here so that `turnout --help` and scenario errors do not pay for the model's imports.
-    return importlib.import_module("orchestrator.jobs")
+    from orchestrator.results import jobs
+
+    return jobs
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .scenario import load_scenario
+    from orchestrator.inputs.scenario import load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.overrides)
     out_dir = args.out if args.out is not None else RESULTS_DIR / scenario.name
@@ -242,29 +243,31 @@ DEFAULT_SCENARIO = "crossing_1_12_through_120.yaml"  # in the repository's scena
 
 
 def _cmd_build_fmus(args: argparse.Namespace) -> int:
-    from .scenario import load_scenario
-
-    from .scenario import bundled_scenario
+    from orchestrator.inputs.scenario import bundled_scenario, load_scenario
 
     path = args.scenario if args.scenario is not None else bundled_scenario(DEFAULT_SCENARIO)
     scenario = load_scenario(path, overrides=args.overrides)
-    built = importlib.import_module("orchestrator.build_job").build_fmus(scenario, args.out)
+    from orchestrator.cosim.build_job import build_fmus
+
+    built = build_fmus(scenario, args.out)
     for name, p in built.items():
         print(f"{PROG}: {name}: {p}")
     return 0
 
 
 def _cmd_export_ssp(args: argparse.Namespace) -> int:
-    from .scenario import load_scenario
+    from orchestrator.inputs.scenario import load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.overrides)
-    out = importlib.import_module("orchestrator.ssp").export_ssp(scenario, args.out)
+    from orchestrator.cosim.ssp import export_ssp
+
+    out = export_ssp(scenario, args.out)
     print(f"{PROG}: system written to {out}")
     return 0
 
 
 def _cmd_frf(args: argparse.Namespace) -> int:
-    from .scenario import load_scenario
+    from orchestrator.inputs.scenario import load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.overrides)
     out_dir = args.out if args.out is not None else RESULTS_DIR / f"{scenario.name}-frf"
@@ -275,9 +278,9 @@ def _cmd_frf(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from .scenario import load_scenario
+    from orchestrator.inputs.scenario import load_scenario
 
-    sweep = importlib.import_module("orchestrator.sweep")
+    from orchestrator.sweeps import sweep
     if args.run_list is not None:
         variations = sweep.list_from_file(args.run_list)
     else:
@@ -297,9 +300,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from .scenario import load_scenario
+    from orchestrator.inputs.scenario import load_scenario
 
-    calibration = importlib.import_module("orchestrator.calibrate")
+    from orchestrator.inverse import calibrate as calibration
     out_dir = args.out if args.out is not None else \
         RESULTS_DIR / f"{load_scenario(args.scenario).name}-calibration"
     try:
@@ -316,9 +319,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from .scenario import load_scenario
+    from orchestrator.inputs.scenario import load_scenario
 
-    diagnosis = importlib.import_module("orchestrator.diagnose")
+    from orchestrator.inverse import diagnose as diagnosis
     out_dir = args.out if args.out is not None else RESULTS_DIR / f"{load_scenario(args.scenario).name}-diagnosis"
     result = diagnosis.diagnose(args.scenario, args.measured, out_dir, validate=args.validate, workers=args.workers,
                                 scheduler=args.scheduler, progress=not args.no_progress)
@@ -330,7 +333,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
 
 def _cmd_synthesize(args: argparse.Namespace) -> int:
-    synthetic = importlib.import_module("orchestrator.synthetic")
+    from orchestrator.inverse import synthetic
     info = synthetic.synthesize_file(args.scenario, args.out, overrides=args.overrides, speed=args.speed,
                                      noise=args.noise, seed=args.seed)
     print(f"{PROG}: synthesize: {args.out} ({info['rate']:g} Hz, noise {info['noise']:g})")
@@ -338,8 +341,8 @@ def _cmd_synthesize(args: argparse.Namespace) -> int:
 
 
 def _cmd_figures(args: argparse.Namespace) -> int:
-    figures = importlib.import_module("orchestrator.figures")
-    sweep = importlib.import_module("orchestrator.sweep")
+    from orchestrator.studies import figures
+    from orchestrator.sweeps import sweep
     try:
         files = figures.make_figures(args.out, study=args.study, workers=args.workers, scheduler=args.scheduler,
                                      progress=not args.no_progress)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.scenario import load_scenario, read_yaml
+from orchestrator.inputs.scenario import load_scenario, read_yaml
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS_DIR = REPO_ROOT / "scenarios"
@@ -65,7 +65,7 @@ def plain_scenario_path() -> Path:
 
 @pytest.fixture(scope="session")
 def default_scenario():
-    """The default scenario, loaded (a frozen :class:`orchestrator.scenario.Scenario`)."""
+    """The default scenario, loaded (a frozen :class:`orchestrator.inputs.scenario.Scenario`)."""
     return load_scenario(DEFAULT_SCENARIO)
 
 

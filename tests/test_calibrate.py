@@ -16,16 +16,16 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from orchestrator import calibrate as cal
-from orchestrator.causes import CATALOGUE
+from orchestrator.inverse import calibrate as cal
+from orchestrator.inverse.causes import CATALOGUE
 from orchestrator.cli import main
-from orchestrator.errors import UserInputError
-from orchestrator.scenario import load_scenario, scenario_from_dict
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
 
 from conftest import SCENARIOS_DIR
 
 MEASUREMENT = SCENARIOS_DIR / "measurement" / "crossing_quarter_120.yaml"
-T = 21  # crossing transition sleeper of the measurement scenario (orchestrator.analysis.reference_point)
+T = 21  # crossing transition sleeper of the measurement scenario (orchestrator.results.analysis.reference_point)
 
 # The bowl's minimum, in parameter units (h1, h2, gap 3 of sleeper T [m]).
 BOWL_TRUTH = {"h1": 0.6, "h2": 2.5, "gap3": 0.8e-3}
@@ -335,7 +335,7 @@ def test_cli_delegates(monkeypatch, tmp_path, capsys):
 # Recovery of hidden parameters from a synthetic measurement (real simulations)
 # --------------------------------------------------------------------------------------
 def _synthetic(tmp_path: Path, h1: float, h2: float, gaps) -> Path:
-    from orchestrator.synthetic import Effect, synthesize
+    from orchestrator.inverse.synthetic import Effect, synthesize
 
     base = load_scenario(MEASUREMENT)
     raw = cal.apply_values(base.raw, cal.parse_params("h1,h2", base), [h1, h2])
@@ -394,8 +394,9 @@ def test_polish_alone_recovers_the_eight_parameters_from_the_nominal_model(tmp_p
     """
     import functools
 
-    from orchestrator.objective import Target
-    from orchestrator.sensing import layout_of, simulate_sensors
+    from orchestrator.inverse.objective import Target
+    from orchestrator.cosim.sensing import simulate_sensors
+    from orchestrator.inputs.sensor_layout import layout_of
 
     t = FULL_TRUTH
     measured = _synthetic(tmp_path, t["h1"], t["h2"], t["gaps"])

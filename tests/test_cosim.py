@@ -3,8 +3,8 @@ import numpy as np
 import scipy.optimize as so
 import scipy.signal as ss
 
-from orchestrator.master import run_cosim
-from orchestrator.scenario import load_scenario
+from orchestrator.cosim.master import run_cosim
+from orchestrator.inputs.scenario import load_scenario
 from track.frf import receptance
 from track.layout import build_layout
 from track.model import build_track
@@ -35,7 +35,7 @@ def test_cosim_matches_monolithic_and_converges_with_the_step():
     """Gauss–Seidel co-simulation vs the monolithic solution of the same equations.
 
     Monolithic = each step iterated until vehicle, contact and track agree (in-process,
-    :func:`orchestrator.master._implicit`). At the default scenario's step the peak
+    :func:`orchestrator.cosim.algorithms._implicit`). At the default scenario's step the peak
     crossing force must agree within 1 % (acceptance). Halving the step must shrink the
     co-simulation error against a 5 us monolithic reference: first order when the
     vehicle holds the contact force over the step (fitted slope 0.7-1.5), second order

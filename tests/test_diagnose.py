@@ -1,6 +1,6 @@
 """Hidden-effect tests of ``turnout diagnose`` (issue 4; DESIGN.md §4.5).
 
-A seeded generator (:func:`orchestrator.synthetic.hidden_effect`) draws an effect —
+A seeded generator (:func:`orchestrator.inverse.synthetic.hidden_effect`) draws an effect —
 type, sleeper, magnitude — that only the test knows; the synthetic measurement
 carries it plus 1 % white noise and an unknown trigger time. The diagnosis gets the
 nominal scenario and the file, nothing else, and must
@@ -27,11 +27,11 @@ Parameter tolerances, and why:
 import numpy as np
 import pytest
 
-from orchestrator.diagnose import diagnose
-from orchestrator.scenario import bundled_scenario, load_scenario
-from orchestrator.sensing import layout_of
-from orchestrator.sensor_layout import resolve
-from orchestrator.synthetic import hidden_effect, synthesize
+from orchestrator.inverse.diagnose import diagnose
+from orchestrator.inputs.scenario import bundled_scenario, load_scenario
+from orchestrator.inputs.sensor_layout import layout_of
+from orchestrator.inputs.sensor_layout import resolve
+from orchestrator.inverse.synthetic import hidden_effect, synthesize
 from track.model import build_track
 
 SCENARIO = bundled_scenario("measurement/crossing_quarter_120.yaml")
@@ -66,8 +66,8 @@ def test_hidden_effect_is_named_fitted_and_gains(setup, tmp_path, kind, seed):
     synthesize(sc, effect, tmp_path / "passage.csv", seed=seed)
     validate = []
     if kind == "ballast_void":
-        from orchestrator.scenario import scenario_from_dict
-        from orchestrator.sensing import variant_for_speed
+        from orchestrator.inputs.scenario import scenario_from_dict
+        from orchestrator.cosim.sensing import variant_for_speed
         slow = scenario_from_dict(variant_for_speed(sc.raw, VALIDATION_SPEED), source=str(SCENARIO),
                                   base_dir=SCENARIO.parent)
         synthesize(slow, effect, tmp_path / "passage_100.h5", seed=seed + 1000)
@@ -136,7 +136,7 @@ def test_confusion_over_many_seeds():
 def test_cli_bad_input_is_one_line_exit_2(tmp_path, capsys, monkeypatch, make, extra, words):
     """Bad measured data or options: exit 2, one line naming the problem, before any run."""
     from orchestrator.cli import main
-    from orchestrator.measured import write_measured
+    from orchestrator.inputs.measured import write_measured
 
     monkeypatch.chdir(tmp_path)
     t = np.arange(200) / 2500.0

@@ -1,10 +1,10 @@
-"""Bounded least squares with batched finite-difference Jacobians (orchestrator.fitting)."""
+"""Bounded least squares with batched finite-difference Jacobians (orchestrator.inverse.fitting)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from orchestrator.fitting import fit_unit_cube
+from orchestrator.inverse.fitting import fit_unit_cube
 
 T = np.linspace(0.0, 1.0, 40)
 

@@ -473,7 +473,7 @@ def test_build_fmus_for_a_scenario(plain_scenario, tmp_path):
     """build-fmus: the track FMU has the scenario vehicle's wheels (bogie: 4) and the
     scenario's speed and wheel load as start values; both vehicle FMUs are built;
     build_fmu("track") gives the default track for 4 wheels."""
-    from orchestrator.build_job import build_fmus
+    from orchestrator.cosim.build_job import build_fmus
 
     built = build_fmus(plain_scenario, tmp_path / "fmus")
     assert sorted(built) == ["bogie", "quarter", "track"] and all(p.is_file() for p in built.values())
@@ -498,9 +498,9 @@ EPS = np.finfo(float).eps
 @pytest.fixture(scope="module")
 def crossing_fmu(tmp_path_factory, scenarios_dir):
     """The quarter scenario's track (40-sleeper 1:12 turnout) as a 2-wheel FMU with the
-    scenario's sensor layout, resolved and baked by orchestrator.build_job."""
-    from orchestrator.sensing import scenario_sensors
-    from orchestrator.scenario import load_scenario
+    scenario's sensor layout, resolved and baked by orchestrator.cosim.build_job."""
+    from orchestrator.inputs.sensor_layout import scenario_sensors
+    from orchestrator.inputs.scenario import load_scenario
 
     scenario = load_scenario(scenarios_dir / QUARTER_SCENARIO)
     sensors = scenario_sensors(scenario)
@@ -542,7 +542,7 @@ def test_every_sensor_of_the_layout_is_an_output_with_its_unit(crossing_fmu):
     the layout file."""
     import zipfile
 
-    from orchestrator.sensing import layout_of
+    from orchestrator.inputs.sensor_layout import layout_of
 
     layout = layout_of(crossing_fmu["scenario"])
     md = read_model_description(str(crossing_fmu["path"]))
@@ -633,9 +633,9 @@ def test_sensor_reader_matches_sensor_signals_with_open_bushings(scenarios_dir):
     states of a turnout with a void under the transition sleeper, where some bushings
     under the pressure cells are open and some closed: the restricted ballast evaluates
     the same bi-linear law.  Tolerance as in the FMU test above: 2 gamma_n |c|.|x|."""
-    from orchestrator.scenario import load_scenario
-    from orchestrator.sensing import layout_of
-    from orchestrator.sensor_layout import resolve
+    from orchestrator.inputs.scenario import load_scenario
+    from orchestrator.inputs.sensor_layout import layout_of
+    from orchestrator.inputs.sensor_layout import resolve
 
     from fmus.track_fmu import SensorReader
     from track.sensors import compile_sensors, displacement_row, sensor_signals
@@ -713,10 +713,10 @@ def test_fmu_state_round_trip_restores_the_sensor_outputs(crossing_fmu):
 def test_build_job_sensor_layout_policy(plain_scenario, scenarios_dir, caplog):
     """The default layout is drawn for a turnout: on the plain track it does not fit,
     so build_fmus bakes no sensors and warns; a layout the scenario names must fit."""
-    from orchestrator.sensing import scenario_sensors
-    from orchestrator.errors import UserInputError
+    from orchestrator.inputs.sensor_layout import scenario_sensors
+    from orchestrator.inputs.errors import UserInputError
 
-    with caplog.at_level(logging.WARNING, logger="orchestrator.sensing"):
+    with caplog.at_level(logging.WARNING, logger="orchestrator.cosim.sensing"):
         assert scenario_sensors(plain_scenario) == []
     assert any("default sensor layout does not fit" in r.getMessage() for r in caplog.records)
     named = dataclasses.replace(plain_scenario, sensors=str(scenarios_dir / "sensors" / "in2track_like.yaml"))

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from orchestrator.cli import main
-from orchestrator.errors import UserInputError
-from orchestrator.master import run_cosim
-from orchestrator.scenario import load_scenario, scenario_from_dict
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.cosim.master import run_cosim
+from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
 from track.model import build_track
 from track.params import GRAVITY
 from track.post import ballast_forces

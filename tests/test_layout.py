@@ -370,7 +370,7 @@ def test_plot_layout(tmp_path, kw):
     """The plan view draws one rectangle per sleeper and one line per plan line."""
     import matplotlib
     matplotlib.use("Agg")
-    from orchestrator.plots_layout import plot_layout
+    from orchestrator.results.plots_layout import plot_layout
 
     lay = build_layout(turnout(**kw))
     fig = plot_layout(lay)

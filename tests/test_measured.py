@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from orchestrator.errors import UserInputError
-from orchestrator.measured import (MAX_GAP_SAMPLES, MeasuredData, align, check_measured, check_rate,
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.measured import (MAX_GAP_SAMPLES, MeasuredData, align, check_measured, check_rate,
                                    read_measured, resample, write_measured)
 
 SENSORS = {"A1": "pressure", "A2": "pressure", "C1": "displacement", "D1": "strain", "E1": "acceleration"}

@@ -1,4 +1,4 @@
-"""Scenario loading (orchestrator.scenario) and the command line's handling of user errors."""
+"""Scenario loading (orchestrator.inputs.scenario) and the command line's handling of user errors."""
 from __future__ import annotations
 
 import copy
@@ -16,8 +16,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from orchestrator.cli import main
-from orchestrator.errors import ScenarioError, UserInputError
-from orchestrator.scenario import (  # _Loader: the scenario files' YAML rules, to read README cells
+from orchestrator.inputs.errors import ScenarioError, UserInputError
+from orchestrator.inputs.scenario import (  # _Loader: the scenario files' YAML rules, to read README cells
     PortMap,
     Scenario,
     SimulationSpec,
@@ -664,7 +664,7 @@ def fake_jobs(monkeypatch):
             calls.append(("run", scenario, out_dir, progress, backend)) or {},
         frf_job=lambda scenario, out_dir, at, fmax: calls.append(("frf", scenario, out_dir, at, fmax)) or {},
     )
-    monkeypatch.setitem(sys.modules, "orchestrator.jobs", module)
+    monkeypatch.setitem(sys.modules, "orchestrator.results.jobs", module)
     return calls
 
 
@@ -688,6 +688,6 @@ def test_cli_user_error_from_job(monkeypatch, default_scenario_path, capsys):
     def fail(scenario, out_dir, at, fmax):
         raise UserInputError("no rail body named 'nose'\n(have: crossing)")
 
-    monkeypatch.setitem(sys.modules, "orchestrator.jobs", types.SimpleNamespace(frf_job=fail))
+    monkeypatch.setitem(sys.modules, "orchestrator.results.jobs", types.SimpleNamespace(frf_job=fail))
     assert main(["frf", str(default_scenario_path), "--at", "nose:1"]) == 2
     assert capsys.readouterr().err == "turnout: error: no rail body named 'nose' (have: crossing)\n"

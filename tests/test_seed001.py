@@ -2,17 +2,17 @@
 
 60E1-R760-1:15 crossing panel, through route, quarter vehicle with a flexible
 wheelset, 20 t (scenarios/seed001/crossing_1_15_quarter.yaml), each run from 2 m
-ahead of the transfer point to 3 m behind it (orchestrator.study.run_case), step
+ahead of the transfer point to 3 m behind it (orchestrator.sweeps.study.run_case), step
 100 us (peak forces within 0.3 % of 10 us, tests/test_cosim.py).
 """
 import numpy as np
 import pytest
 
-from orchestrator.figures import SEED001
+from orchestrator.studies.figures import SEED001
 
 from conftest import REPO_ROOT, SCENARIOS_DIR
-from orchestrator.scenario import load_scenario
-from orchestrator.study import run_case
+from orchestrator.inputs.scenario import load_scenario
+from orchestrator.sweeps.study import run_case
 
 KMH = 1 / 3.6
 SOFT, STIFF = 1.2e8, 1.2e9
@@ -110,7 +110,7 @@ def test_d_moments_grow_with_impact_angle(runs):
 def test_figures_command_writes_the_seed_figures(tmp_path, monkeypatch, capsys):
     """`turnout figures` end to end on a reduced grid (2 speeds instead of 6): every figure
     file is written and the table has one row per run; a second call resumes (no run redone)."""
-    from orchestrator import figures
+    from orchestrator.studies import figures
     from orchestrator.cli import main
 
     monkeypatch.setattr(figures, "SPEEDS_KMH", (80, 200))

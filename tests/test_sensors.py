@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from orchestrator.errors import UserInputError
-from orchestrator.scenario import bundled_scenario, load_scenario
-from orchestrator.sensor_layout import layout_from_dict, load_layout, resolve
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.scenario import bundled_scenario, load_scenario
+from orchestrator.inputs.sensor_layout import layout_from_dict, load_layout, resolve
 from track.model import build_track
 from track.post import sleeper_pressure
 from track.sensors import Sensor, compile_sensors, displacement_from_acceleration, sensor_signals
@@ -72,7 +72,7 @@ def test_default_layout_resolves_on_the_crossing(turnout):
     lay = load_layout(sc.sensors)
     sensors = resolve(lay, model)
     assert [s.id for s in sensors] == lay.ids
-    from orchestrator.analysis import reference_point
+    from track.model import reference_point
     _, x_t, k_t = reference_point(model)
     a = [s for s in sensors if s.group == "A"]
     assert {s.body for s in a} == {f"sleeper_{k_t}"} and len(a) == 6

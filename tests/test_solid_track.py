@@ -12,8 +12,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from orchestrator.master import run_cosim
-from orchestrator.scenario import load_scenario, scenario_from_dict
+from orchestrator.cosim.master import run_cosim
+from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
 from track.frf import receptance
 from track.layout import build_layout
 from track.model import build_track

@@ -1,4 +1,4 @@
-"""``turnout export-ssp`` (orchestrator.ssp): the SSP file, and running it in other FMI tools.
+"""``turnout export-ssp`` (orchestrator.cosim.ssp): the SSP file, and running it in other FMI tools.
 
 * structure: the exported SystemStructure.ssd / .ssv files validate against the SSP 1.0
   schemas bundled with FMPy, FMPy's SSP reader reads them, every connection joins an
@@ -26,9 +26,9 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-from orchestrator.errors import UserInputError
-from orchestrator.scenario import load_scenario, read_yaml, scenario_from_dict
-from orchestrator.ssp import (NS, SSD_FILE, Component, Connection, default_x_start, export_ssp,
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.scenario import load_scenario, read_yaml, scenario_from_dict
+from orchestrator.cosim.ssp import (NS, SSD_FILE, Component, Connection, default_x_start, export_ssp,
                               read_ssp, run_ssp_fmpy, run_ssp_libcosim, write_ssp)
 
 fmpy = pytest.importorskip("fmpy")
@@ -347,7 +347,7 @@ def test_run_ssp_fmpy_agrees_with_libcosim(turnout_libcosim, turnout_ssp, turnou
 
 def test_master_jacobi_agrees_with_libcosim(turnout_libcosim, turnout_scenario, tmp_path):
     """``turnout run``'s engine, FMU backend, algorithm jacobi, the same step."""
-    from orchestrator.master import run_cosim
+    from orchestrator.cosim.master import run_cosim
 
     res = run_cosim(turnout_scenario, backend="fmu", fmu_dir=tmp_path / "fmus", record_states=False)
     assert res.error is None and res.stats["algorithm"] == "jacobi"

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator import sweep
+from orchestrator.sweeps import sweep
 from orchestrator.cli import main
-from orchestrator.errors import ScenarioError, UserInputError
-from orchestrator.scenario import load_scenario
+from orchestrator.inputs.errors import ScenarioError, UserInputError
+from orchestrator.inputs.scenario import load_scenario
 
 from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO
 
@@ -386,9 +386,9 @@ def test_cli_incomplete_sweep_exits_1_with_one_line(monkeypatch, tmp_path, capsy
 
 
 # --------------------------------------------------------------------------------------
-# A real run (orchestrator.study.run_case, the default run function)
+# A real run (orchestrator.sweeps.study.run_case, the default run function)
 # --------------------------------------------------------------------------------------
-@pytest.mark.skipif(importlib.util.find_spec("orchestrator.study") is None, reason="orchestrator.study not there")
+@pytest.mark.skipif(importlib.util.find_spec("orchestrator.sweeps.study") is None, reason="orchestrator.sweeps.study not there")
 def test_real_sweep_through_the_cli_matches_single_runs(tmp_path, capsys):
     """Two 10 ms quarter-vehicle runs on a 12-sleeper plain track through ``turnout sweep``.
 
@@ -396,7 +396,7 @@ def test_real_sweep_through_the_cli_matches_single_runs(tmp_path, capsys):
     got the overrides. Same code, same inputs: the tolerance 1e-9 only allows for
     a different summation order in threaded BLAS.
     """
-    from orchestrator.study import run_case
+    from orchestrator.sweeps.study import run_case
 
     base = tmp_path / "tiny.yaml"
     base.write_text(PLAIN_SCENARIO.read_text(encoding="utf-8")

@@ -337,6 +337,20 @@ def _split_crossing(lay: Layout, params: TrackParams):
     return replace(lay, rails=tuple(rails), joints=tuple(joints), running=running), solid_crossing(sp_)
 
 
+def reference_point(model: TrackModel) -> tuple[str, float, int]:
+    """(crossing-side wheel, x of the crossing transition, transition sleeper index).
+
+    Plain track: the left side and the middle sleeper.
+    """
+    lay = model.layout
+    if lay.x_transition is not None:
+        k = lay.params.transition_sleeper
+        k = len(lay.sleepers) // 2 + 1 if k is None else k
+        return lay.crossing_side, lay.x_transition, k
+    k = len(lay.sleepers) // 2
+    return "left", lay.sleepers[k].x, k
+
+
 def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel:
     """Build the reduced track model.
 

@@ -1,6 +1,6 @@
 """Parameter dataclasses of the track model (SI units throughout).
 
-These are the contracts between the scenario loader (``orchestrator.scenario``),
+These are the contracts between the scenario loader (``orchestrator.inputs.scenario``),
 the layout generator (``track.layout``) and the model builder (``track.model``).
 They hold numbers only, never file paths.
 """

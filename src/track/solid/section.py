@@ -16,7 +16,7 @@ fitted numbers are rounded to 0.1 mm, leaving errors of +0.014 % and +0.001 %
 (60E1: 80.9 mm = I / W_foot).
 
 The Timoshenko shear coefficient of a polygon is computed by
-:func:`shear_coefficient` (2D finite elements, see there) rather than taken
+:func:`track.solid.fem.shear_coefficient` (2D finite elements, see there) rather than taken
 from the 0.34-0.40 literature range, so that a beam and a solid of the same
 polygon can be compared like with like.
 """
@@ -214,62 +214,4 @@ def rail_60e1_like() -> RailSection:
     return RailSection(RailShape(**_60E1_LIKE).polygon(), name="60E1-like")
 
 
-def shear_coefficient(section: RailSection, h: float = 0.004) -> float:
-    """Timoshenko shear coefficient for vertical shear, by 2D finite elements.
-
-    Energy definition with the Saint-Venant flexure shear stresses for
-    Poisson's ratio 0: under a shear force ``V`` (along ``z``) the shear stresses
-    are ``tau = (V / I_y) grad g`` with
-
-        laplace(g) = z - z_c  in the section,   dg/dn = 0 on its boundary,
-
-    and ``kappa`` is defined by ``int |tau|^2 dA = V^2 / (kappa A)``, i.e.
-    ``kappa = I_y^2 / (A int |grad g|^2 dA)``. For a rectangle this gives 5/6.
-    Solved with quadratic triangles (scikit-fem) on a gmsh mesh of size ``h``.
-
-    Poisson's ratio enters the exact flexure solution only through a small
-    correction (Cowper 1966 gives 0.833 -> 0.850 for a rectangle at nu = 0.3,
-    2 %). Shear is 6 % of the mid-span deflection of a 2 m simply supported
-    60E1 rail (25 % at 1 m), so 2 % in kappa moves that deflection by ~0.1 %
-    (0.5 % at 1 m).
-
-    Parameters
-    ----------
-    section : RailSection
-    h : float
-        Mesh size [m].
-
-    Returns
-    -------
-    float
-        kappa [-].
-    """
-    import skfem
-    from skfem.helpers import dot, grad
-
-    from .mesh import section_mesh
-
-    pts, tris = section_mesh(section.vertices, h)
-    props = section.properties
-    mesh = skfem.MeshTri(pts.T.copy(), tris.T.copy())
-    basis = skfem.Basis(mesh, skfem.ElementTriP2())
-    zc = props.centroid[1]
-
-    @skfem.BilinearForm
-    def laplace(u, v, w):
-        return dot(grad(u), grad(v))
-
-    @skfem.LinearForm
-    def load(v, w):
-        return -(w.x[1] - zc) * v
-
-    K = laplace.assemble(basis)
-    b = load.assemble(basis)
-    # Pure Neumann problem, compatible load (int (z - z_c) dA = 0): fix g at one dof.
-    g = skfem.solve(*skfem.condense(K, b, D=np.array([0])))
-    energy = float(g @ (K @ g))
-    return props.I_y ** 2 / (props.A * energy)
-
-
-__all__ = ["SectionProperties", "polygon_properties", "RailShape", "RailSection", "rail_60e1_like",
-           "shear_coefficient"]
+__all__ = ["SectionProperties", "polygon_properties", "RailShape", "RailSection", "rail_60e1_like"]

@@ -1,12 +1,12 @@
 """Surrogate calibration of a scenario against a measurement (DESIGN.md §5, as in seed 000).
 
-Pipeline (every stage's runs go through :func:`orchestrator.sweep.run_sweep`, so they
+Pipeline (every stage's runs go through :func:`orchestrator.sweeps.sweep.run_sweep`, so they
 are resumable and run on local processes or a Dask cluster):
 
 0. **Parameters** (:func:`parse_params`) are mapped to the unit cube, ``u in [0, 1]^k``;
    stiffness scales on a log scale. Bounds and scales come from the cause catalogue
-   (:data:`orchestrator.causes.CATALOGUE`) unless given. The objective is J of
-   :mod:`orchestrator.objective` (weighted sum over sensor groups of the channels'
+   (:data:`orchestrator.inverse.causes.CATALOGUE`) unless given. The objective is J of
+   :mod:`orchestrator.inverse.objective` (weighted sum over sensor groups of the channels'
    nRMSE), with the time alignment fixed once from the nominal scenario.
 1. **Latin hypercube** of ``n1`` runs over the whole cube (:class:`scipy.stats.qmc.LatinHypercube`).
 2. **Response surface**: a polyharmonic spline (:class:`scipy.interpolate.RBFInterpolator`,
@@ -35,10 +35,10 @@ are resumable and run on local processes or a Dask cluster):
 6. **Confirmation**: the optimum is simulated (with the nominal scenario, for the
    before/after comparison).
 7. **Polish** (added to the seed's procedure; ``polish=0`` leaves it out): bounded
-   least squares on real runs (:func:`orchestrator.fitting.fit_unit_cube`, ``trf`` over
+   least squares on real runs (:func:`orchestrator.inverse.fitting.fit_unit_cube`, ``trf`` over
    the *whole* unit cube, the finite-difference Jacobian's ``k`` runs in parallel) of
    the weighted residual vector whose sum of squares is J's least-squares counterpart
-   (:meth:`orchestrator.objective.Target.weighted_residuals`), started from the better of
+   (:meth:`orchestrator.inverse.objective.Target.weighted_residuals`), started from the better of
    the confirmed optimum and the best run of the design, and again from the nominal
    scenario. Why: with 8 parameters a 1256-run spline resolves J only to its CV error
    (~30 % of J's spread, measured), and near the optimum the void gaps move J by less
@@ -102,8 +102,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .causes import CATALOGUE, N_GAPS, CauseKind
-from .errors import ScenarioError, UserInputError, one_line
+from orchestrator.inverse.causes import CATALOGUE, N_GAPS, CauseKind
+from orchestrator.inputs.errors import ScenarioError, UserInputError, one_line
 
 __all__ = [
     "Parameter",
@@ -276,8 +276,8 @@ def parse_params(spec: str | None, scenario) -> list[Parameter]:
     UserInputError
         An unknown item, a bad sleeper or bound, a key that is not numeric, a parameter given twice.
     """
-    from .scenario import scenario_from_dict
-    from .sweep import _at
+    from orchestrator.inputs.scenario import scenario_from_dict
+    from orchestrator.sweeps.sweep import _at
 
     spec = DEFAULT_PARAMS if spec is None or not spec.strip() else spec
     n_sleepers = int(scenario.raw["track"]["layout"]["sleepers"])
@@ -286,7 +286,7 @@ def parse_params(spec: str | None, scenario) -> list[Parameter]:
     def transition() -> int:
         from track.model import build_track
 
-        from .analysis import reference_point
+        from track.model import reference_point
         return int(reference_point(build_track(scenario.track))[2])
 
     params: list[Parameter] = []
@@ -358,7 +358,7 @@ def _base_dir(scenario) -> Path:
 
 
 def _set_key(raw: dict, key: str, value: float) -> None:
-    from .scenario import parse_override
+    from orchestrator.inputs.scenario import parse_override
 
     tokens, _ = parse_override(f"{key}=0")
     node = raw
@@ -387,7 +387,7 @@ def apply_values(raw: dict, params: Sequence[Parameter], values: Sequence[float]
 
 def _variation(raw: dict, params: Sequence[Parameter], values: Sequence[float], label: str) -> dict:
     """The sweep variation ``{key.path: value}`` of one point (whole values of the keys touched)."""
-    from .sweep import _at
+    from orchestrator.sweeps.sweep import _at
 
     new = apply_values(raw, params, values)
     keys = dict.fromkeys(p.key if p.key is not None else _cause_key(p.kind.name, p.sleeper) for p in params)
@@ -401,7 +401,7 @@ def _values(params: Sequence[Parameter], u: np.ndarray) -> list[float]:
 
 def nominal_values(raw: dict, params: Sequence[Parameter]) -> list[float]:
     """The parameters' values in a raw scenario [their units] (the inverse of :func:`apply_values`)."""
-    from .sweep import _at
+    from orchestrator.sweeps.sweep import _at
 
     return [float(_at(raw, p.key)) if p.key is not None else float(p.kind.nominal(raw, p.sleeper)[p.index])
             for p in params]
@@ -414,8 +414,8 @@ _TARGETS: dict[tuple, Any] = {}  # per worker process: (measured file, layout fi
 
 
 def _target(measured: str, scenario):
-    from .objective import Target
-    from .sensing import layout_of
+    from orchestrator.inverse.objective import Target
+    from orchestrator.inputs.sensor_layout import layout_of
 
     key = (measured, scenario.sensors)
     if key not in _TARGETS:
@@ -436,9 +436,9 @@ def objective_run(scenario, run_dir: Path, *, measured: str, shift: float, save_
     run_dir : Path
         The run's folder (``signals.npz`` goes there with ``save_signals``).
     measured : str
-        The measurement file (CSV, HDF5 or MAT; :func:`orchestrator.measured.read_measured`).
+        The measurement file (CSV, HDF5 or MAT; :func:`orchestrator.inputs.measured.read_measured`).
     shift : float
-        Time alignment [s] fixed once for all runs (:meth:`orchestrator.objective.Target.align_to`).
+        Time alignment [s] fixed once for all runs (:meth:`orchestrator.inverse.objective.Target.align_to`).
     save_signals : bool
         Write the simulated sensor signals (``t`` [s] and one array per sensor id, shape (nt,)).
     save_residuals : bool
@@ -450,7 +450,7 @@ def objective_run(scenario, run_dir: Path, *, measured: str, shift: float, save_
         ``objective`` (J [-]) and ``nrmse.<id>`` [-] per measured channel; a run
         that stopped early gives ``objective = nan`` and its ``error``.
     """
-    from .sensing import simulate_sensors
+    from orchestrator.cosim.sensing import simulate_sensors
 
     target = _target(measured, scenario)
     target.shift = float(shift)
@@ -769,7 +769,7 @@ class CalibrationResult:
     scenario_file : Path
         ``calibrated.yaml``.
     stages : dict
-        Stage -> the :class:`orchestrator.sweep.SweepResult` of its runs.
+        Stage -> the :class:`orchestrator.sweeps.sweep.SweepResult` of its runs.
     """
 
     params: list
@@ -797,8 +797,8 @@ def _stage(base_path, points: np.ndarray, raw: dict, params, label: str, out: Pa
 
 
 def _sweep(base_path, variations, out: Path, what: str, **kw):
-    """:func:`orchestrator.sweep.run_sweep`; unfinished or failed runs raise :class:`CalibrationIncomplete`."""
-    from .sweep import SweepIncomplete, run_sweep
+    """:func:`orchestrator.sweeps.sweep.run_sweep`; unfinished or failed runs raise :class:`CalibrationIncomplete`."""
+    from orchestrator.sweeps.sweep import SweepIncomplete, run_sweep
 
     try:
         res = run_sweep(base_path, variations, out, **kw)
@@ -870,7 +870,7 @@ def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, 
     CalibrationIncomplete
         Runs of a stage failed or were lost; a rerun does only the missing ones.
     """
-    from .scenario import dump_scenario, load_scenario, scenario_from_dict
+    from orchestrator.inputs.scenario import dump_scenario, load_scenario, scenario_from_dict
 
     t_start = time.perf_counter()
     base_path = Path(base_path)
@@ -899,8 +899,9 @@ def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, 
         measured = Path(measured)
         if not measured.is_file():
             raise UserInputError(f"--measured {measured}: no such file")
-        from .objective import Target
-        from .sensing import layout_of, simulate_sensors
+        from orchestrator.inverse.objective import Target
+        from orchestrator.cosim.sensing import simulate_sensors
+        from orchestrator.inputs.sensor_layout import layout_of
 
         target = Target.read(measured, layout_of(scenario))  # a constant channel: objective.channel_scales
         nominal = simulate_sensors(scenario, target.layout, reconstruct=False)
@@ -1070,8 +1071,8 @@ def _polish(snapshot: Path, raw: dict, params, starts: dict, out: Path, polish_f
     """
     from tqdm import tqdm
 
-    from .fitting import fit_unit_cube
-    from .sweep import make_executor
+    from orchestrator.inverse.fitting import fit_unit_cube
+    from orchestrator.sweeps.sweep import make_executor
 
     t0 = time.perf_counter()
     found: dict[bytes, tuple[float, dict]] = {}
@@ -1131,8 +1132,8 @@ def _polish(snapshot: Path, raw: dict, params, starts: dict, out: Path, polish_f
 
 def _snapshot(scenario, out: Path):
     """Write ``OUT/base.yaml`` and ``OUT/sensors.yaml`` (its sensor layout); returns the snapshot's scenario."""
-    from .scenario import dump_scenario, scenario_from_dict
-    from .sensor_layout import default_layout_path
+    from orchestrator.inputs.scenario import dump_scenario, scenario_from_dict
+    from orchestrator.inputs.sensor_layout import default_layout_path
 
     raw = copy.deepcopy(scenario.raw)
     layout = Path(raw["sensors"]) if raw.get("sensors") else default_layout_path()
@@ -1171,7 +1172,7 @@ def _surrogate_summary(s: Surrogate) -> dict:
 def _plots(out: Path, params, s1: Surrogate, s: Surrogate, y1, y, sens, lo2, hi2, target, shown: dict,
            source: str) -> list[Path]:
     """The CV, sensitivity and signal plots; ``shown``: label -> (runs folder, run id) of saved signals."""
-    from .plots import _plt, save
+    from orchestrator.results.plots import _plt, save
 
     plt = _plt()
     files = []

@@ -1,6 +1,6 @@
 """Post-processing of one co-simulation with the same track model: the quantities of the seeds.
 
-:func:`analyse` turns a :class:`orchestrator.master.CosimResult` into
+:func:`analyse` turns a :class:`orchestrator.cosim.master.CosimResult` into
 - scalars: peak / minimum contact forces, ΔQ = Q_max - Q0 on the crossing side, the
   maximum bending moment along the crossing rail and along the sleeper under the
   crossing transition (with their instants), the peak sleeper-ballast pressure under
@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from track.model import TrackModel
+from track.model import TrackModel, reference_point
 from track.post import body_response, sleeper_pressure
 
 SIDE_WINDOW = 0.3   # m: half-width of the sleeper region under a rail seat for the side pressures
@@ -30,20 +30,6 @@ class Analysis:
 
     scalars: dict = field(default_factory=dict)
     arrays: dict = field(default_factory=dict)
-
-
-def reference_point(model: TrackModel) -> tuple[str, float, int]:
-    """(crossing-side wheel, x of the crossing transition, transition sleeper index).
-
-    Plain track: the left side and the middle sleeper.
-    """
-    lay = model.layout
-    if lay.x_transition is not None:
-        k = lay.params.transition_sleeper
-        k = len(lay.sleepers) // 2 + 1 if k is None else k
-        return lay.crossing_side, lay.x_transition, k
-    k = len(lay.sleepers) // 2
-    return "left", lay.sleepers[k].x, k
 
 
 def wheel_sides(m: int) -> list[str]:

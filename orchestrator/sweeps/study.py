@@ -1,8 +1,8 @@
 """One run of a parameter study: co-simulation in-process, analysis, arrays on disk.
 
-:func:`run_case` is the default per-run function of :mod:`orchestrator.sweep`: it
+:func:`run_case` is the default per-run function of :mod:`orchestrator.sweeps.sweep`: it
 runs the scenario with the in-process backend (the same model objects as the FMUs,
-without building FMUs in every worker), analyses it (:mod:`orchestrator.analysis`),
+without building FMUs in every worker), analyses it (:mod:`orchestrator.results.analysis`),
 writes the arrays the seed figures need to ``run_dir/arrays.npz`` and returns the
 scalars for the sweep table.
 
@@ -22,8 +22,9 @@ import numpy as np
 from track.layout import build_layout
 from track.model import build_track
 
-from .analysis import analyse
-from .master import END_MARGIN_SLEEPERS, run_cosim, start_position
+from orchestrator.results.analysis import analyse
+from orchestrator.cosim.master import run_cosim
+from orchestrator.cosim.passage import END_MARGIN_SLEEPERS, start_position
 
 AFTER_TRANSITION = 3.0  # m: a study run ends when the front wheelset is this far behind the transfer
 

@@ -45,8 +45,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from .errors import ScenarioError, UserInputError
-from .scenario import parse_override, read_yaml, scenario_from_dict
+from orchestrator.inputs.errors import ScenarioError, UserInputError
+from orchestrator.inputs.scenario import parse_override, read_yaml, scenario_from_dict
 
 __all__ = [
     "Run",
@@ -364,10 +364,10 @@ def _write_atomic(path: Path, text: str) -> None:
 def _execute(base_path: str, overrides: Sequence[str], run_dir: str, run_id: str, index: int,
              run_fn: Callable | None) -> dict:
     """Do one run in a worker: fresh run folder, scenario, ``run_fn``, ``result.json``; returns the record."""
-    from .scenario import load_scenario
+    from orchestrator.inputs.scenario import load_scenario
 
     if run_fn is None:
-        from .study import run_case as run_fn  # imported here: tests and other studies pass their own
+        from orchestrator.sweeps.study import run_case as run_fn  # imported here: tests and other studies pass their own
     folder = Path(run_dir)
     if folder.exists():  # files of an attempt that was killed: start from scratch
         shutil.rmtree(folder)
@@ -464,7 +464,7 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]], varied_keys: Sequence[str],
         The files written; none when the first varied key is not numeric.
         Scalars that are not numbers (strings, booleans) get no plot.
     """
-    from .plots import _plt, save  # the package's plotting setup (Agg backend) and writer
+    from orchestrator.results.plots import _plt, save  # the package's plotting setup (Agg backend) and writer
 
     if not rows or not varied_keys:
         return []
@@ -592,7 +592,7 @@ def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, An
         ``OUT``; created if needed. Runs finished there before are not redone.
     run_fn : callable, optional
         ``run_fn(scenario, run_dir) -> dict[str, float]``, a top-level (picklable)
-        function; default :func:`orchestrator.study.run_case`. Non-scalar
+        function; default :func:`orchestrator.sweeps.study.run_case`. Non-scalar
         values it returns are left out of the table (write arrays to ``run_dir``).
     workers : int
         Local worker processes (default 2).

@@ -3,11 +3,11 @@
 The procedure (DESIGN.md §4.5; every threshold is a named constant below):
 
 1. **Baseline.** The nominal scenario is simulated and compared with the measurement
-   (:class:`orchestrator.objective.Target`: time alignment on the accelerometers,
+   (:class:`orchestrator.inverse.objective.Target`: time alignment on the accelerometers,
    per-channel nRMSE, the objective J, the noise level of each channel estimated from
    the measurement itself, chi-square). *Where* it is wrong: per group, per sleeper
    carrying sensors, and the time window holding 80 % of each channel's residual.
-2. **Screening.** Every candidate of the catalogue (:mod:`orchestrator.causes`: each
+2. **Screening.** Every candidate of the catalogue (:mod:`orchestrator.inverse.causes`: each
    cause at each sleeper carrying sensors, and the global ones) is run at the few
    magnitudes of its screening grid. Between grid points the *signals* are
    interpolated (monotone cubic in the magnitude, log scale for stiffness factors),
@@ -22,7 +22,7 @@ The procedure (DESIGN.md §4.5; every threshold is a named constant below):
    (a void's six gaps; the other causes have one) by bounded least squares
    (:func:`scipy.optimize.least_squares`, ``trf``) on the weighted, normalised
    residuals, with the finite-difference Jacobian's runs done in parallel
-   (:func:`orchestrator.fitting.fit_unit_cube`).
+   (:func:`orchestrator.inverse.fitting.fit_unit_cube`).
 5. **Ranking and naming.** Each candidate's evidence: its objective, the reduction of
    the objective, chi-square and the Bayesian information criterion
    BIC = chi2 + k ln N (k fitted parameters, N samples). The named cause is the
@@ -50,10 +50,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .causes import Candidate, candidates, kind_of
-from .errors import UserInputError
-from .objective import Comparison, Target
-from .sensing import variant_for_speed
+from orchestrator.inverse.causes import Candidate, candidates, kind_of
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inverse.objective import Comparison, Target
+from orchestrator.cosim.sensing import variant_for_speed
 
 DELTA_BIC = 10.0     # BIC difference for "very strong" evidence (Kass & Raftery 1995)
 CONFIRM = 4          # candidates re-run at their screened optimum
@@ -91,7 +91,7 @@ class _Pool:
     bar: object = None
 
     def map(self, raws: list[dict]) -> list:
-        from .sensing import sensors_job
+        from orchestrator.cosim.sensing import sensors_job
 
         t0 = time.perf_counter()
         futures = [self.executor.submit(sensors_job, raw, self.base_dir, self.layout_path) for raw in raws]
@@ -186,7 +186,7 @@ def _stages(kind) -> list:
 def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated, stages: slice = slice(None),
          max_nfev: int = FIT_MAX_NFEV) -> Evaluated:
     """A candidate's parameters by bounded least squares, through ``_stages(kind)[stages]`` (module doc, step 4)."""
-    from .fitting import fit_unit_cube
+    from orchestrator.inverse.fitting import fit_unit_cube
 
     c = start.candidate
     kind = kind_of(c)
@@ -252,7 +252,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
     scenario_path : path-like
         The nominal scenario.
     measured_path : path-like
-        The measured passage (CSV, HDF5, MAT; :mod:`orchestrator.measured`).
+        The measured passage (CSV, HDF5, MAT; :mod:`orchestrator.inputs.measured`).
     out_dir : path-like
     validate : sequence of str
         Further passages as ``FILE@SPEED`` (speed in m/s): compared before/after, not fitted.
@@ -271,10 +271,10 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
 
     from track.model import build_track
 
-    from .scenario import dump_scenario, load_scenario, scenario_from_dict
-    from .sensing import layout_of
-    from .sensor_layout import resolve
-    from .sweep import make_executor
+    from orchestrator.inputs.scenario import dump_scenario, load_scenario, scenario_from_dict
+    from orchestrator.inputs.sensor_layout import layout_of
+    from orchestrator.inputs.sensor_layout import resolve
+    from orchestrator.sweeps.sweep import make_executor
 
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -403,7 +403,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
                      "candidates": [c.label for c in cands]},
     }
     (out_dir / "diagnosis.json").write_text(json.dumps(result, indent=1, default=_json_default))
-    from .diagnose_report import write_report
+    from orchestrator.inverse.diagnose_report import write_report
 
     write_report(out_dir, result, target, base.cmp, after, layout)
     return result

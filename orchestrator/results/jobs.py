@@ -1,6 +1,6 @@
 """Jobs behind the command line: each takes a loaded Scenario and an output folder.
 
-``run_scenario`` runs the co-simulation (:mod:`orchestrator.master`) and
+``run_scenario`` runs the co-simulation (:mod:`orchestrator.cosim.master`) and
 post-processes the recorded track states with the same track model: contact
 forces, wheel and rail displacements, bending-moment envelopes along the crossing
 rail and the transition sleeper, the instants of maximum moment, ballast pressure.
@@ -19,10 +19,11 @@ from track.model import build_track
 from track.post import body_response
 from track.statics import static_equilibrium
 
-from . import plots
-from .analysis import analyse, reference_point
-from .errors import UserInputError
-from .plots_layout import plot_layout
+from orchestrator.results import plots
+from orchestrator.results.analysis import analyse
+from track.model import reference_point
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.results.plots_layout import plot_layout
 
 FRF_POINTS = 400          # frequencies of a receptance curve
 FRF_FMIN = 5.0            # Hz
@@ -49,7 +50,7 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     (divergence, a failing FMU) everything computed so far is written first and a
     :class:`UserInputError` names the cause.
     """
-    from .master import run_cosim
+    from orchestrator.cosim.master import run_cosim
 
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -122,7 +123,7 @@ def _virtual_sensors(scenario, model, res) -> dict:
     """The sensor layout's signals (DESIGN.md §4.3) at the output times; {} without a track record."""
     from track.sensors import compile_sensors, sensor_signals
 
-    from .sensing import layout_of, scenario_sensors
+    from orchestrator.inputs.sensor_layout import layout_of, scenario_sensors
 
     rec = res.track_record
     if rec is None or "a" not in rec or len(rec["t"]) < 2 or len(rec["t"]) != len(res.t):

@@ -1,8 +1,8 @@
 """Bounded least squares on simulation runs, the Jacobian's runs in one parallel batch.
 
 Used where a fit's residuals come from whole simulations (a run takes seconds):
-:func:`orchestrator.diagnose._fit` (a cause's parameters) and the polish stage of
-:func:`orchestrator.calibrate.calibrate`. :func:`scipy.optimize.least_squares` (``trf``,
+:func:`orchestrator.inverse.diagnose._fit` (a cause's parameters) and the polish stage of
+:func:`orchestrator.inverse.calibrate.calibrate`. :func:`scipy.optimize.least_squares` (``trf``,
 bounds ``[0, 1]^n``) drives the iteration; its Jacobian is a forward difference whose
 ``n`` perturbed runs are handed over together, so that they run on all workers at once.
 """

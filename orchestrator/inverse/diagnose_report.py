@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .plots import _plt, save
+from orchestrator.results.plots import _plt, save
 
 UNITS = {"pressure": ("kPa", 1e-3), "displacement": ("mm", 1e3), "acceleration": ("m/s²", 1.0),
          "strain": ("µε", 1e6)}

@@ -49,7 +49,7 @@ Parameter values:
   the scenario's ``vehicle.speed``).
 
 With our vehicles the run must keep the wheels on the modelled panel over
-``simulation.duration`` (the check of ``turnout run``, :func:`orchestrator.master.check_passage`);
+``simulation.duration`` (the check of ``turnout run``, :func:`orchestrator.cosim.passage.check_passage`);
 otherwise :class:`UserInputError`. A third-party vehicle's start position is its own
 parameter and is not checked.
 
@@ -135,7 +135,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from .errors import UserInputError
+from orchestrator.inputs.errors import UserInputError
 
 __all__ = [
     "Connection",
@@ -263,10 +263,10 @@ def system_connections(scenario) -> list[Connection]:
 
 def default_x_start(scenario) -> float:
     """Default track coordinate of the front wheelset at t = 0 [m]: the master's choice
-    (:func:`orchestrator.master.start_position`), so the SSP and ``turnout run`` agree."""
+    (:func:`orchestrator.cosim.passage.start_position`), so the SSP and ``turnout run`` agree."""
     from track.layout import build_layout
 
-    from .master import start_position
+    from orchestrator.cosim.passage import start_position
 
     sc = scenario
     if sc.simulation.x_start is not None:  # the default, not the scenario's value
@@ -347,7 +347,7 @@ def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
 
     Parameters
     ----------
-    scenario : orchestrator.scenario.Scenario
+    scenario : orchestrator.inputs.scenario.Scenario
     out_file : Path
         The ``.ssp`` file to write (its folder is created; an existing file is replaced).
     fmu_dir : Path, optional
@@ -378,7 +378,7 @@ def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
     if scenario.vehicle.builtin:  # the wheels must stay on the modelled panel (as in `turnout run`)
         from track.layout import build_layout
 
-        from .master import check_passage
+        from orchestrator.cosim.passage import check_passage
 
         check_passage(scenario, build_layout(scenario.track.layout), vehicle_values["x0"])
     with tempfile.TemporaryDirectory(prefix="xpanel_ssp_") as tmp:
@@ -546,7 +546,7 @@ def write_ssp(out_file: Path, components: Sequence[Component], connections: Sequ
             _check_value(c.name, variables[c.name].get(pname), pname, value)
 
     root = ET.Element(_q("ssd", "SystemStructureDescription"),
-                      {"version": "1.0", "name": name, "generationTool": "turnout-cosim (orchestrator.ssp)"})
+                      {"version": "1.0", "name": name, "generationTool": "turnout-cosim (orchestrator.cosim.ssp)"})
     system = ET.SubElement(root, _q("ssd", "System"), {"name": name})
     elements = ET.SubElement(system, _q("ssd", "Elements"))
     used_units = set()

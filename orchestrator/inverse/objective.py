@@ -18,7 +18,7 @@ spread of the first differences, sigma = 1.4826 MAD(diff m) / sqrt(2) — exact 
 noise on a signal that is smooth at the sampling interval (the passage signals are,
 at 5 kHz: pressure, strain and displacement change over milliseconds), and robust to
 the few large differences of an impact. It feeds the chi-square ``sum (r/sigma)^2``
-of the information criterion used by the diagnosis (:mod:`orchestrator.diagnose`).
+of the information criterion used by the diagnosis (:mod:`orchestrator.inverse.diagnose`).
 """
 from __future__ import annotations
 
@@ -135,7 +135,7 @@ def compare(measured, t_sim: np.ndarray, sim: dict, groups: dict, weights: dict,
 
     Parameters
     ----------
-    measured : orchestrator.measured.MeasuredData
+    measured : orchestrator.inputs.measured.MeasuredData
     t_sim : ndarray, shape (nt,)
         Simulated times [s].
     sim : dict
@@ -146,13 +146,13 @@ def compare(measured, t_sim: np.ndarray, sim: dict, groups: dict, weights: dict,
         Sensor id -> noise standard deviation of the measured channel (:func:`noise_sigma`).
     shift : float, optional
         Time alignment [s]; ``None``: estimated by cross-correlation
-        (:func:`orchestrator.measured.align`), within ``max_shift`` of 0.
+        (:func:`orchestrator.inputs.measured.align`), within ``max_shift`` of 0.
     types : dict, optional
         Sensor id -> type; with ``highpass`` [Hz], displacement channels of ``sim`` are
         accelerations, reconstructed on the measured base (:func:`on_measured_base`).
         Without, ``sim`` is compared as it is.
     """
-    from .measured import align
+    from orchestrator.inputs.measured import align
 
     ids = [k for k in measured.channels if k in sim]
     if not ids:
@@ -239,8 +239,8 @@ class Target:
 
     Attributes
     ----------
-    measured : orchestrator.measured.MeasuredData
-    layout : orchestrator.sensor_layout.SensorLayout
+    measured : orchestrator.inputs.measured.MeasuredData
+    layout : orchestrator.inputs.sensor_layout.SensorLayout
     sigma : dict
         Sensor id -> noise std estimated from the measurement (:func:`channel_scales`).
     shift : float or None
@@ -261,7 +261,7 @@ class Target:
     @classmethod
     def read(cls, path, layout) -> "Target":
         """Read and check a measurement file against a layout (every layout sensor optional)."""
-        from .measured import read_measured
+        from orchestrator.inputs.measured import read_measured
 
         data = read_measured(path, layout.types)
         scale, sigma = channel_scales(data, layout.groups)
@@ -275,7 +275,7 @@ class Target:
         cases the shift found from them was within 0.07 ms of the truth, against up to
         1.2 ms from the pressures and 9 ms from all channels together).
         """
-        from .measured import align
+        from orchestrator.inputs.measured import align
 
         acc = [k for k, t in self.layout.types.items() if t == "acceleration" and k in self.measured.channels]
         use = acc or [k for k in self.measured.channels if k in sim]

@@ -1,7 +1,7 @@
 """Synthetic measurements: a scenario with an effect, sampled as a field campaign would be.
 
 :func:`synthesize` runs the scenario with the effect (a cause of
-:mod:`orchestrator.causes` at given parameters) and turns its virtual sensors into a
+:mod:`orchestrator.inverse.causes` at given parameters) and turns its virtual sensors into a
 measurement file:
 
 1. the acquisition samples at ``rate`` [Hz] (default: the layout's, at most half the
@@ -31,10 +31,11 @@ from scipy.interpolate import CubicSpline
 
 from track.sensors import displacement_from_acceleration
 
-from .causes import CATALOGUE, N_GAPS
-from .errors import UserInputError
-from .measured import write_measured
-from .sensing import layout_of, simulate_sensors
+from orchestrator.inverse.causes import CATALOGUE, N_GAPS
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.measured import write_measured
+from orchestrator.cosim.sensing import simulate_sensors
+from orchestrator.inputs.sensor_layout import layout_of
 
 DEFAULT_NOISE = 0.01   # noise std / channel std
 MAX_RATE_SHARE = 0.5   # sampling rate <= this x the simulation's output rate (module docstring)
@@ -88,7 +89,7 @@ def synthesize(scenario, effect: Effect, out_file, *, noise: float = DEFAULT_NOI
     dict
         What was hidden: effect, trigger, rate, noise, seed (for the test, not the diagnosis).
     """
-    from .scenario import scenario_from_dict
+    from orchestrator.inputs.scenario import scenario_from_dict
 
     rng = np.random.default_rng(seed)
     layout = layout_of(scenario)
@@ -116,8 +117,8 @@ def synthesize(scenario, effect: Effect, out_file, *, noise: float = DEFAULT_NOI
 def synthesize_file(scenario_path, out_file, overrides=(), speed: float | None = None, noise: float | None = None,
                     seed: int = 0) -> dict:
     """:func:`synthesize` for the command line: the effect given as scenario overrides."""
-    from .scenario import load_scenario, scenario_from_dict
-    from .sensing import variant_for_speed
+    from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
+    from orchestrator.cosim.sensing import variant_for_speed
 
     scenario = load_scenario(scenario_path, overrides=list(overrides))
     if speed is not None:

@@ -22,17 +22,20 @@ objects for a given track model. The default layout is
 """
 from __future__ import annotations
 
+import logging
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from track.model import TrackModel
+from track.model import TrackModel, build_track
 from track.sensors import GAUGE_LENGTH, RECONSTRUCTION_HIGHPASS, SENSOR_TYPES, Sensor
 
-from .errors import UserInputError, did_you_mean as _hint
-from .scenario import read_yaml
+from orchestrator.inputs.errors import UserInputError, did_you_mean as _hint
+from orchestrator.inputs.scenario import read_yaml
+
+log = logging.getLogger(__name__)
 
 DEFAULT_LAYOUT = "in2track_like.yaml"
 _TOP_KEYS = ("name", "rate", "displacement_highpass", "weights", "sensors", "description")
@@ -67,7 +70,7 @@ class SensorLayout:
 
 def default_layout_path() -> Path:
     """The bundled default layout (from the source tree or the current folder)."""
-    from .scenario import bundled_scenario
+    from orchestrator.inputs.scenario import bundled_scenario
 
     return bundled_scenario(f"sensors/{DEFAULT_LAYOUT}")
 
@@ -153,7 +156,7 @@ def load_layout(path=None) -> SensorLayout:
 
 
 def _transition(model: TrackModel) -> tuple[int, float]:
-    from .analysis import reference_point
+    from track.model import reference_point
 
     _, x_ref, k = reference_point(model)
     return k, x_ref
@@ -226,4 +229,34 @@ def resolve(layout: SensorLayout, model: TrackModel) -> list[Sensor]:
     return out
 
 
-__all__ = ["SensorLayout", "load_layout", "layout_from_dict", "resolve", "default_layout_path"]
+def layout_of(scenario) -> SensorLayout:
+    """The scenario's sensor layout (``sensors:``), or the default one."""
+    return load_layout(scenario.sensors)
+
+
+def scenario_sensors(scenario, model=None) -> list:
+    """The scenario's sensor layout resolved on its track model.
+
+    Returns
+    -------
+    list of track.sensors.Sensor
+        Empty when the scenario gives no layout and the default one does not fit its
+        track (e.g. plain track: logged as a warning).
+
+    Raises
+    ------
+    UserInputError
+        The scenario's layout file is invalid or one of its sensors does not fit this track.
+    """
+    layout = layout_of(scenario)
+    try:
+        return resolve(layout, build_track(scenario.track) if model is None else model)
+    except UserInputError as exc:
+        if scenario.sensors is not None:
+            raise
+        log.warning("the default sensor layout does not fit this track (%s): no sensor signals; "
+                    "give the scenario a layout (sensors:) for them", exc)
+        return []
+
+
+__all__ = ["layout_of", "scenario_sensors", "SensorLayout", "load_layout", "layout_from_dict", "resolve", "default_layout_path"]

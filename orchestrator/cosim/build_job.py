@@ -20,8 +20,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .master import INPUTS_AT_START, n_wheels
-from .sensing import scenario_sensors
+from orchestrator.cosim.algorithms import ALGORITHMS
+from orchestrator.cosim.passage import n_wheels
+from orchestrator.inputs.sensor_layout import scenario_sensors
 
 VEHICLE_KINDS = ("bogie", "quarter")
 
@@ -31,7 +32,7 @@ def build_fmus(scenario, out_dir: Path) -> dict[str, Path]:
 
     Parameters
     ----------
-    scenario : orchestrator.scenario.Scenario
+    scenario : orchestrator.inputs.scenario.Scenario
     out_dir : Path
         Destination folder (created if missing).
 
@@ -44,7 +45,7 @@ def build_fmus(scenario, out_dir: Path) -> dict[str, Path]:
 
     out_dir = Path(out_dir)
     veh, sim = scenario.vehicle, scenario.simulation
-    extrapolate = INPUTS_AT_START.get(sim.algorithm, False) and sim.extrapolation
+    extrapolate = ALGORITHMS[sim.algorithm].inputs_at_start and sim.extrapolation
     built = {"track": build_track_fmu(scenario.track, n_wheels(scenario), out_dir,
                                       sensors=scenario_sensors(scenario), speed=veh.speed,
                                       static_wheel_load=0.5 * veh.axle_load, extrapolate=extrapolate,

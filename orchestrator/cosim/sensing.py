@@ -1,7 +1,7 @@
 """Run a scenario and read its virtual sensors (the simulated side of every comparison).
 
 :func:`simulate_sensors` runs the co-simulation in-process (the same model objects as
-the FMUs; :mod:`orchestrator.master`), records the track states at the output step and
+the FMUs; :mod:`orchestrator.cosim.master`), records the track states at the output step and
 reads the layout's sensors from them (:mod:`track.sensors`). :func:`sensors_job` is the
 top-level (picklable) form that diagnosis and calibration send to worker processes: it
 takes the scenario as a validated raw mapping.
@@ -9,19 +9,14 @@ takes the scenario as a validated raw mapping.
 from __future__ import annotations
 
 import copy
-import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from track.model import build_track
 from track.sensors import compile_sensors, sensor_signals
 
-from .sensor_layout import SensorLayout, load_layout, resolve
-
-log = logging.getLogger(__name__)
-
+from orchestrator.inputs.sensor_layout import SensorLayout, layout_of, load_layout, resolve
 
 @dataclass
 class SensorRun:
@@ -42,47 +37,15 @@ class SensorRun:
     error: str | None = None
 
 
-def layout_of(scenario) -> SensorLayout:
-    """The scenario's sensor layout (``sensors:``), or the default one."""
-    return load_layout(scenario.sensors)
-
-
-def scenario_sensors(scenario, model=None) -> list:
-    """The scenario's sensor layout resolved on its track model.
-
-    Returns
-    -------
-    list of track.sensors.Sensor
-        Empty when the scenario gives no layout and the default one does not fit its
-        track (e.g. plain track: logged as a warning).
-
-    Raises
-    ------
-    UserInputError
-        The scenario's layout file is invalid or one of its sensors does not fit this track.
-    """
-    from .errors import UserInputError
-
-    layout = layout_of(scenario)
-    try:
-        return resolve(layout, build_track(scenario.track) if model is None else model)
-    except UserInputError as exc:
-        if scenario.sensors is not None:
-            raise
-        log.warning("the default sensor layout does not fit this track (%s): no sensor signals; "
-                    "give the scenario a layout (sensors:) for them", exc)
-        return []
-
-
 def simulate_sensors(scenario, layout: SensorLayout | None = None, reconstruct: bool = True) -> SensorRun:
     """Co-simulate ``scenario`` in-process and read its sensors at every output step.
 
     With ``reconstruct=False`` displacement sensors give their accelerometer's signal
-    [m/s^2]: :func:`orchestrator.objective.compare` and the synthetic measurements
+    [m/s^2]: :func:`orchestrator.inverse.objective.compare` and the synthetic measurements
     reconstruct the displacement on the measured time base, the window the
     measurement's own reconstruction used.
     """
-    from .master import run_cosim
+    from orchestrator.cosim.master import run_cosim
 
     layout = layout_of(scenario) if layout is None else layout
     res = run_cosim(scenario, backend="inprocess", record_states=True)
@@ -110,11 +73,11 @@ def variant_for_speed(raw: dict, speed: float) -> dict:
 
 def sensors_job(raw: dict, base_dir: str, layout_path: str | None, reconstruct: bool = False) -> SensorRun:
     """:func:`simulate_sensors` of a raw scenario mapping (for worker processes)."""
-    from .scenario import scenario_from_dict
+    from orchestrator.inputs.scenario import scenario_from_dict
 
     scenario = scenario_from_dict(raw, source="<variant>", base_dir=Path(base_dir))
     layout = load_layout(layout_path) if layout_path else None
     return simulate_sensors(scenario, layout, reconstruct=reconstruct)
 
 
-__all__ = ["scenario_sensors", "variant_for_speed", "SensorRun", "simulate_sensors", "sensors_job", "layout_of"]
+__all__ = ["variant_for_speed", "SensorRun", "simulate_sensors", "sensors_job"]

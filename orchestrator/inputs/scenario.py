@@ -12,7 +12,7 @@ source for each default) and lists the keys (:func:`scenario_keys`) for the
 README test. Checks that involve several keys (sleeper indices against the
 number of sleepers, turnout-only keys on plain track, ...) run after it.
 
-Every problem raises :class:`~orchestrator.errors.ScenarioError` naming the
+Every problem raises :class:`~orchestrator.inputs.errors.ScenarioError` naming the
 dotted key path; the caller's dict is never modified.
 """
 from __future__ import annotations
@@ -40,8 +40,8 @@ from track.params import (
     VoidSpec,
 )
 
-from .errors import ScenarioError, UserInputError
-from .errors import did_you_mean as _hint
+from orchestrator.inputs.errors import ScenarioError, UserInputError
+from orchestrator.inputs.errors import did_you_mean as _hint
 
 __all__ = [
     "PortMap",

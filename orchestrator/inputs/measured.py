@@ -17,7 +17,7 @@ come as
   v7.3 files are HDF5 and are read with h5py (same layout rules).
 
 :func:`read_measured` returns a :class:`MeasuredData` or raises
-:class:`~orchestrator.errors.UserInputError` with one line naming the file, the
+:class:`~orchestrator.inputs.errors.UserInputError` with one line naming the file, the
 channel and the offending value or index. The checks, in order, and why:
 
 1. **Channels.** Columns that are not sensors of the layout are ignored (noted).
@@ -100,7 +100,7 @@ import numpy as np
 
 from track.sensors import SENSOR_TYPES   # the one list of sensor types (DESIGN §4.3)
 
-from .errors import UserInputError, did_you_mean as _hint
+from orchestrator.inputs.errors import UserInputError, did_you_mean as _hint
 
 __all__ = [
     "SENSOR_TYPES",

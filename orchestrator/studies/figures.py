@@ -2,7 +2,7 @@
 
 Seed 001 (Pålsson 2020), 60E1-R760-1:15 crossing, quarter vehicle, through route:
 a sweep over speed (10-200 km/h) x impact angle (6/12/18 mrad) x rail-pad stiffness
-(120 / 1200 MN/m) on the executor and resumable store of :mod:`orchestrator.sweep`,
+(120 / 1200 MN/m) on the executor and resumable store of :mod:`orchestrator.sweeps.sweep`,
 then
 - fig3_dQ.png: ΔQ against speed x impact angle, soft and stiff pads (seed Fig. 3);
 - fig4_rail.png: crossing-rail deflection and moment at the instant of maximum rail
@@ -174,8 +174,8 @@ def seed000_table(out_dir: Path) -> list[Path]:
     """
     from dataclasses import replace
 
-    from .master import run_cosim
-    from .scenario import bundled_scenario, load_scenario
+    from orchestrator.cosim.master import run_cosim
+    from orchestrator.inputs.scenario import bundled_scenario, load_scenario
     from track.model import build_track
 
     sc = load_scenario(bundled_scenario(SEED000))
@@ -215,8 +215,8 @@ def seed000_receptance(out_dir: Path, fmax: float = FRF_FMAX, n_freqs: int = 400
     """
     from dataclasses import replace
 
-    from .plots import plot_frf, save
-    from .scenario import bundled_scenario, load_scenario
+    from orchestrator.results.plots import plot_frf, save
+    from orchestrator.inputs.scenario import bundled_scenario, load_scenario
     from track.frf import receptance
     from track.model import build_track
     from track.statics import static_equilibrium
@@ -251,14 +251,15 @@ SEED000_VOID = (0.0, 0.4e-3, 0.9e-3, 0.9e-3, 0.4e-3, 0.0)   # m: DESIGN.md §4.2
 def seed000_pressure(out_dir: Path, workers: int = 2, scheduler: str | None = None,
                      progress: bool = True) -> list[Path]:
     """Seed 000's measured vs nominal vs calibrated ballast pressure (module docstring)."""
-    from .analysis import reference_point
-    from .diagnose import diagnose
-    from .objective import Target
-    from .plots import save
-    from .scenario import bundled_scenario, load_scenario
-    from .sensing import layout_of, simulate_sensors
-    from .sensor_layout import resolve
-    from .synthetic import Effect, synthesize
+    from track.model import reference_point
+    from orchestrator.inverse.diagnose import diagnose
+    from orchestrator.inverse.objective import Target
+    from orchestrator.results.plots import save
+    from orchestrator.inputs.scenario import bundled_scenario, load_scenario
+    from orchestrator.cosim.sensing import simulate_sensors
+    from orchestrator.inputs.sensor_layout import layout_of
+    from orchestrator.inputs.sensor_layout import resolve
+    from orchestrator.inverse.synthetic import Effect, synthesize
     from track.model import build_track
 
     out_dir = Path(out_dir)
@@ -323,14 +324,14 @@ def make_figures(out_dir: Path, study: str = "all", workers: int = 2, scheduler:
     ``speeds_kmh`` defaults to :data:`SPEEDS_KMH` (the seed's range).
     """
     speeds_kmh = SPEEDS_KMH if speeds_kmh is None else tuple(speeds_kmh)
-    from .sweep import run_sweep
+    from orchestrator.sweeps.sweep import run_sweep
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files: list[Path] = []
     if study in ("seed001", "all"):
-        from .scenario import bundled_scenario
-        from .sweep import expand_grid
+        from orchestrator.inputs.scenario import bundled_scenario
+        from orchestrator.sweeps.sweep import expand_grid
         res = run_sweep(bundled_scenario(SEED001), expand_grid(seed001_variations(speeds_kmh)),
                         out_dir / "seed001_runs", workers=workers, scheduler=scheduler, progress=progress)
         if res.failed:

@@ -1,0 +1,277 @@
+"""The two units of a co-simulation, one interface for both backends.
+
+- vehicle: input contact forces ``Fz`` (up +) -> outputs wheel ``x``, ``z`` (up +), ``vz``;
+- track: inputs wheel ``x``, ``z``, ``vz`` -> outputs contact forces ``Fz``.
+
+``InProcessVehicle`` / ``InProcessTrack`` step the model objects directly
+(``vehicle.VehicleStepper``, ``track.cosim.TrackCosim``); ``FmuVehicle`` / ``FmuTrack``
+run FMUs (ours, or a third-party vehicle mapped through the scenario's ``ports``) through
+FMPy's low-level API.
+"""
+from __future__ import annotations
+
+import ctypes
+from pathlib import Path
+
+import numpy as np
+
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.scenario import PortMap
+
+
+class CosimError(UserInputError):
+    """The co-simulation stopped (a unit failed or the coupled solution diverged)."""
+
+
+class InProcessVehicle:
+    """Our bogie / quarter vehicle stepped directly (no FMU boundary).
+
+    ``start_values`` set fields of the parameter dataclass (as the FMU's parameters
+    of the same names do).
+    """
+
+    def __init__(self, kind: str, speed: float, axle_load: float, x0: float, start_values: dict | None = None,
+                 hold: str = "zoh"):
+        import dataclasses
+
+        from vehicle.bogie import BogieParams, bogie
+        from vehicle.quarter import QuarterParams, quarter_vehicle
+        from vehicle.stepper import VehicleStepper
+
+        cls, build = (BogieParams, bogie) if kind == "bogie" else (QuarterParams, quarter_vehicle)
+        names = {f.name for f in dataclasses.fields(cls)}
+        extra = dict(start_values or {})
+        unknown = sorted(set(extra) - names)
+        if unknown:
+            raise UserInputError(f"vehicle.start_values: {unknown[0]!r} is not a parameter of the {kind} "
+                                 f"(have: {', '.join(sorted(names))})")
+        self.model = build(cls(**{"axle_load": axle_load, **extra}))
+        self.n = self.model.n_wheels
+        self.speed, self.x0 = speed, x0
+        st = self.model.static_state(np.zeros(self.n))
+        self._stepper_cls, self._q0, self.Fz0 = VehicleStepper, st.q, st.Fz
+        self.hold = hold
+        self.stepper = None
+        self.t = 0.0
+
+    def initialize(self, h: float) -> None:
+        self.stepper = self._stepper_cls(self.model, h, hold=self.hold, q0=self._q0, Fz0=self.Fz0)
+
+    def get_state(self):
+        return self.stepper.get_state(), self.t
+
+    def set_state(self, s) -> None:
+        self.stepper.set_state(s[0])
+        self.t = s[1]
+
+    def step(self, t: float, h: float, Fz: np.ndarray) -> None:
+        self.stepper.step(Fz)
+        self.t = t + h
+
+    def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.model.wheel_x(self.t, self.x0, self.speed), self.stepper.wheel_z, self.stepper.wheel_vz
+
+    def terminate(self) -> None:
+        pass
+
+
+class InProcessTrack:
+    """:class:`track.cosim.TrackCosim` stepped directly."""
+
+    def __init__(self, scenario, n_wheels: int, h: float, extrapolate: bool, record_every: int,
+                 extrapolate_force: bool):
+        from track.cosim import TrackCosim
+        from track.model import build_track
+
+        self.model = build_track(scenario.track)
+        self.engine = TrackCosim(scenario.track, n_wheels, 0.5 * scenario.vehicle.axle_load, h,
+                                 speed=scenario.vehicle.speed, extrapolate=extrapolate,
+                                 record_every=record_every, model=self.model,
+                                 extrapolate_force=extrapolate_force)
+
+    def step(self, t: float, h: float, x, z, vz) -> None:
+        self.engine.do_step(x, z, vz)
+
+    def forces(self) -> np.ndarray:
+        """The vehicle's input: the contact forces, extrapolated when asked."""
+        return self.engine.Fz_coupling
+
+    def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        e = self.engine
+        return e.Fz, e.parts, e.rail_w
+
+    def record(self) -> dict:
+        return self.engine.record.arrays()
+
+    def get_state(self):
+        return self.engine.get_state()
+
+    def set_state(self, s) -> None:
+        self.engine.set_state(s)
+
+    def terminate(self) -> None:
+        pass
+
+
+class FmuUnit:
+    """An FMI 2.0 co-simulation FMU driven through FMPy's raw C functions.
+
+    The per-step path uses preallocated ctypes arrays (no allocation, no logging
+    wrapper); a status above fmi2Warning raises :class:`CosimError` naming the FMU,
+    the call and the time.
+    """
+
+    def __init__(self, path: Path, name: str, start_values: dict | None = None):
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        self.path, self.name = Path(path), name
+        self.md = read_model_description(str(path))
+        if self.md.coSimulation is None:
+            raise UserInputError(f"{path}: not a co-simulation FMU")
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self._dir = extract(str(path))
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._dir,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
+        self.fmu.instantiate(loggingOn=False)
+        self._fn = self.fmu._functions
+        self._c = self.fmu.component
+        for key, value in (start_values or {}).items():
+            self.set_start(key, value)
+
+    def vr(self, name: str) -> int:
+        v = self.vars.get(name)
+        if v is None:
+            import difflib
+            hint = difflib.get_close_matches(name, list(self.vars), n=1)
+            raise UserInputError(f"{self.path.name}: no variable {name!r}"
+                                 + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+        return v.valueReference
+
+    def set_start(self, name: str, value) -> None:
+        v = self.vars.get(name)
+        if v is None:
+            self.vr(name)  # raises with a hint
+        vr = [v.valueReference]
+        if v.type == "Real":
+            self.fmu.setReal(vr, [float(value)])
+        elif v.type in ("Integer", "Enumeration"):
+            self.fmu.setInteger(vr, [int(value)])
+        elif v.type == "Boolean":
+            self.fmu.setBoolean(vr, [bool(value)])
+        else:
+            self.fmu.setString(vr, [str(value)])
+
+    def initialize(self, t0: float) -> None:
+        self.fmu.setupExperiment(startTime=t0)
+        self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+
+    def real_port(self, names: list[str]) -> "RealPort":
+        return RealPort(self, [self.vr(n) for n in names])
+
+    def do_step(self, t: float, h: float) -> None:
+        status = self._fn["fmi2DoStep"](self._c, ctypes.c_double(t), ctypes.c_double(h), 1)
+        if status > 1:
+            raise CosimError(f"{self.name} FMU ({self.path.name}): fmi2DoStep at t = {t:.6g} s with step "
+                             f"{h:.3g} s returned status {status} (discard/error); see its log, or reduce "
+                             "simulation.step")
+
+    def terminate(self) -> None:
+        try:
+            self.fmu.terminate()
+        finally:
+            self.fmu.freeInstance()
+
+
+class RealPort:
+    """Preallocated get/set of a fixed list of Real variables of one FMU."""
+
+    def __init__(self, unit: FmuUnit, vrs: list[int]):
+        n = len(vrs)
+        self.unit = unit
+        self._vr = (ctypes.c_uint * n)(*vrs)
+        self._buf = (ctypes.c_double * n)()
+        self._n = n
+        self.values = np.frombuffer(self._buf, dtype=np.float64)
+
+    def get(self) -> np.ndarray:
+        status = self.unit._fn["fmi2GetReal"](self.unit._c, self._vr, self._n, self._buf)
+        if status > 1:
+            raise CosimError(f"{self.unit.name} FMU: fmi2GetReal returned status {status}")
+        return self.values
+
+    def set(self, values: np.ndarray) -> None:
+        self.values[:] = values
+        status = self.unit._fn["fmi2SetReal"](self.unit._c, self._vr, self._n, self._buf)
+        if status > 1:
+            raise CosimError(f"{self.unit.name} FMU: fmi2SetReal returned status {status} "
+                             f"(values {np.array2string(np.asarray(values), precision=4)})")
+
+
+class FmuVehicle:
+    """A vehicle FMU (ours or a third party's) seen in our convention."""
+
+    def __init__(self, path: Path, ports: list[PortMap], params: dict, start_values: dict):
+        self.unit = FmuUnit(path, "vehicle", {**params, **start_values})
+        self.n = len(ports)
+        self._x = self.unit.real_port([p.x for p in ports])
+        self._z = self.unit.real_port([p.z for p in ports])
+        self._vz = self.unit.real_port([p.vz for p in ports])
+        self._F = self.unit.real_port([p.Fz for p in ports])
+        self._zs = np.array([p.z_sign for p in ports], float)
+        self._vzs = np.array([p.vz_sign for p in ports], float)
+        self._Fs = np.array([p.Fz_sign for p in ports], float)
+
+    def initialize(self, t0: float) -> None:
+        self.unit.initialize(t0)
+        self.Fz0 = self._Fs * self._F.get()
+
+    def step(self, t: float, h: float, Fz: np.ndarray) -> None:
+        self._F.set(self._Fs * Fz)
+        self.unit.do_step(t, h)
+
+    def outputs(self):
+        return self._x.get().copy(), self._zs * self._z.get(), self._vzs * self._vz.get()
+
+    def terminate(self) -> None:
+        self.unit.terminate()
+
+
+class FmuTrack:
+    """Our track FMU."""
+
+    def __init__(self, path: Path, n_wheels: int, params: dict):
+        self.unit = FmuUnit(path, "track", params)
+        w = range(1, n_wheels + 1)
+        self._in = self.unit.real_port([f"wheel{i}_{s}" for s in ("x", "z", "vz") for i in w])
+        self._out = self.unit.real_port([f"wheel{i}_{s}" for s in ("Fz", "Fz_rail", "Fz_nose", "rail_z")
+                                         for i in w])
+        self._Fz = self.unit.real_port([f"wheel{i}_Fz_coupling" for i in w])
+        self.n = n_wheels
+        self._inbuf = np.empty(3 * n_wheels)
+
+    def initialize(self, t0: float) -> None:
+        self.unit.initialize(t0)
+
+    def step(self, t: float, h: float, x, z, vz) -> None:
+        n = self.n
+        b = self._inbuf
+        b[:n], b[n:2 * n], b[2 * n:] = x, z, vz
+        self._in.set(b)
+        self.unit.do_step(t, h)
+
+    def forces(self) -> np.ndarray:
+        """The vehicle's input only (read every step; the rest at output steps)."""
+        return self._Fz.get().copy()
+
+    def outputs(self):
+        o = self._out.get()
+        n = self.n
+        return o[:n].copy(), np.stack([o[n:2 * n], o[2 * n:3 * n]], axis=1), o[3 * n:].copy()
+
+    def terminate(self) -> None:
+        self.unit.terminate()
+
+
+__all__ = ["CosimError", "InProcessVehicle", "InProcessTrack", "FmuUnit", "RealPort", "FmuVehicle", "FmuTrack"]
