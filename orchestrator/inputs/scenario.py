@@ -40,6 +40,7 @@ from track.params import (
     VoidSpec,
 )
 
+from orchestrator.inputs import keypath
 from orchestrator.inputs.errors import ScenarioError, UserInputError
 from orchestrator.inputs.errors import did_you_mean as _hint
 
@@ -840,9 +841,6 @@ def read_yaml(path: str | os.PathLike) -> Any:
 # --------------------------------------------------------------------------------------
 # Overrides
 # --------------------------------------------------------------------------------------
-_OVERRIDE_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\[\d+\])*(\.[A-Za-z_][A-Za-z0-9_]*(\[\d+\])*)*\Z")
-
-
 def parse_override(text: str) -> tuple[tuple, Any]:
     """Split ``"key.path[0].sub=value"`` into path tokens and the YAML-parsed value.
 
@@ -855,13 +853,11 @@ def parse_override(text: str) -> tuple[tuple, Any]:
         raise ScenarioError(f"override {text!r} is not of the form key.path=value")
     key, value_text = text.split("=", 1)
     key = key.strip()
-    if not _OVERRIDE_KEY.match(key):
-        raise ScenarioError(f"override {text!r}: {key!r} is not a key path like track.ballast.voids[0].gaps")
-    tokens: list[str | int] = []
-    for part in key.split("."):
-        name, *indices = re.split(r"\[", part)
-        tokens.append(name)
-        tokens.extend(int(i.rstrip("]")) for i in indices)
+    try:
+        tokens = keypath.tokens(key)
+    except keypath.KeyPathError:
+        raise ScenarioError(f"override {text!r}: {key!r} is not a key path like track.ballast.voids[0].gaps") \
+            from None
     try:
         value = yaml.load(value_text, Loader=_Loader)  # noqa: S506
     except yaml.YAMLError as exc:

@@ -277,7 +277,7 @@ def parse_params(spec: str | None, scenario) -> list[Parameter]:
         An unknown item, a bad sleeper or bound, a key that is not numeric, a parameter given twice.
     """
     from orchestrator.inputs.scenario import scenario_from_dict
-    from orchestrator.sweeps.sweep import _at
+    from orchestrator.inputs.keypath import get as _at
 
     spec = DEFAULT_PARAMS if spec is None or not spec.strip() else spec
     n_sleepers = int(scenario.raw["track"]["layout"]["sleepers"])
@@ -387,7 +387,7 @@ def apply_values(raw: dict, params: Sequence[Parameter], values: Sequence[float]
 
 def _variation(raw: dict, params: Sequence[Parameter], values: Sequence[float], label: str) -> dict:
     """The sweep variation ``{key.path: value}`` of one point (whole values of the keys touched)."""
-    from orchestrator.sweeps.sweep import _at
+    from orchestrator.inputs.keypath import get as _at
 
     new = apply_values(raw, params, values)
     keys = dict.fromkeys(p.key if p.key is not None else _cause_key(p.kind.name, p.sleeper) for p in params)
@@ -401,7 +401,7 @@ def _values(params: Sequence[Parameter], u: np.ndarray) -> list[float]:
 
 def nominal_values(raw: dict, params: Sequence[Parameter]) -> list[float]:
     """The parameters' values in a raw scenario [their units] (the inverse of :func:`apply_values`)."""
-    from orchestrator.sweeps.sweep import _at
+    from orchestrator.inputs.keypath import get as _at
 
     return [float(_at(raw, p.key)) if p.key is not None else float(p.kind.nominal(raw, p.sleeper)[p.index])
             for p in params]

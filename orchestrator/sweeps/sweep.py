@@ -45,6 +45,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+from orchestrator.inputs import keypath
 from orchestrator.inputs.errors import ScenarioError, UserInputError
 from orchestrator.inputs.scenario import parse_override, read_yaml, scenario_from_dict
 
@@ -168,18 +169,6 @@ def _value_text(value: Any) -> str:
     return text if isinstance(text, str) else json.dumps(value)
 
 
-def _at(raw: Mapping, key: str) -> Any:
-    """The value at ``key`` (a key path) in a validated raw scenario; ``None`` when absent."""
-    tokens, _ = parse_override(f"{key}=0")
-    node: Any = raw
-    for tok in tokens:
-        try:
-            node = node[tok]
-        except (KeyError, IndexError, TypeError):
-            return None
-    return node
-
-
 def _digest(data: Any) -> str:
     text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha1(text.encode("utf-8")).hexdigest()
@@ -254,7 +243,7 @@ def plan_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, A
         # The same call a worker makes (load_scenario = read_yaml + scenario_from_dict).
         raw = scenario_from_dict(data, source=source, overrides=overrides, base_dir=folder).raw
         run_id = RUN_ID_PREFIX + _digest(raw)[:RUN_ID_CHARS]
-        run = Run(index, run_id, overrides, {k: _at(raw, k) for k in varied})
+        run = Run(index, run_id, overrides, {k: keypath.get(raw, k) for k in varied})
         if run_id in seen:
             first = seen[run_id]
             raise UserInputError(f"run {index} ({', '.join(overrides) or 'no overrides'}) is the same scenario as "
