@@ -31,7 +31,7 @@ from scipy.interpolate import CubicSpline
 
 from track.sensors import displacement_from_acceleration
 
-from orchestrator.inverse.causes import CATALOGUE, N_GAPS
+from orchestrator.inverse.causes import CATALOGUE, DRAWS
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.measured import write_measured
 from orchestrator.cosim.sensing import simulate_sensors
@@ -55,8 +55,7 @@ class Effect:
         if self.cause == "none":
             return copy.deepcopy(raw)
         kind = CATALOGUE[self.cause]
-        values = self.parameters["gaps"] if self.cause == "ballast_void" else [self.parameters[kind.names[0]]]
-        return kind.apply(raw, self.sleeper, values)
+        return kind.apply(raw, self.sleeper, kind.values_of(self.parameters))
 
     def as_dict(self) -> dict:
         return {"cause": self.cause, "sleeper": self.sleeper, "parameters": dict(self.parameters)}
@@ -134,8 +133,7 @@ def synthesize_file(scenario_path, out_file, overrides=(), speed: float | None =
 # ------------------------------------------------------------------------------------------
 # The hidden-effect generator
 # ------------------------------------------------------------------------------------------
-HIDDEN_KINDS = ("ballast_void", "ballast_stiffness", "rail_pad_stiffness_local", "impact_angle",
-                "rail_pad_stiffness")
+HIDDEN_KINDS = tuple(d.label for d in DRAWS)   # the registry's synthetic draws (causes.DRAWS)
 
 
 def hidden_effect(seed: int, kind: str | None = None, sleepers=None) -> Effect:
@@ -156,28 +154,12 @@ def hidden_effect(seed: int, kind: str | None = None, sleepers=None) -> Effect:
     """
     rng = np.random.default_rng(seed)
     kind = kind or str(rng.choice(HIDDEN_KINDS))
-    pick = (lambda lo_hi_a, lo_hi_b: rng.uniform(*(lo_hi_a if rng.random() < 0.5 else lo_hi_b)))
     if kind == "none":
         return Effect("none")
-    if kind == "ballast_void":
-        peak = rng.uniform(0.6e-3, 2.0e-3)
-        s = np.linspace(0.0, 1.0, N_GAPS)
-        if rng.random() < 0.5:
-            c, w = rng.uniform(0.3, 0.7), rng.uniform(0.25, 0.5)
-            shape = np.clip(1.0 - ((s - c) / w) ** 2, 0.0, None)
-        else:
-            shape = s if rng.random() < 0.5 else s[::-1]
-        gaps = [float(round(g, 6)) for g in peak * shape / shape.max()]
-        return Effect("ballast_void", int(rng.choice(sleepers)), {"gaps": gaps})
-    if kind == "ballast_stiffness":
-        return Effect("ballast_stiffness", None, {"stiffness_scale": float(pick((0.35, 0.6), (1.8, 3.0)))})
-    if kind == "rail_pad_stiffness_local":
-        return Effect("rail_pad_stiffness", int(rng.choice(sleepers)),
-                      {"stiffness_scale": float(pick((0.1, 0.3), (4.0, 8.0)))})
-    if kind == "rail_pad_stiffness":
-        return Effect("rail_pad_stiffness", None, {"stiffness_scale": float(pick((0.3, 0.5), (2.5, 5.0)))})
-    if kind == "impact_angle":
-        return Effect("impact_angle", None, {"impact_angle": float(rng.uniform(0.012, 0.022))})
+    for d in DRAWS:
+        if d.label == kind:
+            sleeper, parameters = d.draw(rng, sleepers)
+            return Effect(d.cause, sleeper, parameters)
     raise ValueError(f"unknown effect kind {kind!r} (one of {', '.join(HIDDEN_KINDS)}, none)")
 
 
