@@ -17,16 +17,16 @@ from hypothesis import strategies as st
 
 from orchestrator.cli import main
 from orchestrator.inputs.errors import ScenarioError, UserInputError
-from orchestrator.inputs.scenario import (  # _Loader: the scenario files' YAML rules, to read README cells
+from orchestrator.inputs.scenario import (
     PortMap,
     Scenario,
     SimulationSpec,
     dump_scenario,
     load_scenario,
     scenario_from_dict,
-    _Loader,
     scenario_keys,
 )
+from orchestrator.inputs.yaml_io import YamlLoader as _Loader  # the scenario files' YAML rules, to read README cells
 from track.params import (
     BallastParams,
     LayoutParams,

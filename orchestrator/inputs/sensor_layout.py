@@ -33,7 +33,7 @@ from track.model import TrackModel, build_track
 from track.sensors import GAUGE_LENGTH, RECONSTRUCTION_HIGHPASS, SENSOR_TYPES, Sensor
 
 from orchestrator.inputs.errors import UserInputError, did_you_mean as _hint
-from orchestrator.inputs.scenario import read_yaml
+from orchestrator.inputs.yaml_io import read_yaml
 
 log = logging.getLogger(__name__)
 
