@@ -84,7 +84,7 @@ def _add_scenario_args(p: argparse.ArgumentParser) -> None:
 
 
 def _add_executor_options(p: argparse.ArgumentParser) -> None:
-    """--workers, --scheduler, --no-progress: where the runs of a study go (orchestrator.sweeps.sweep)."""
+    """--workers, --scheduler, --no-progress: where the runs of a study go (orchestrator.sweeps.executors)."""
     p.add_argument("--workers", metavar="N", type=_positive_int, default=2,
                    help="local worker processes (default: 2; ignored with --scheduler)")
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -93,10 +93,19 @@ def _add_executor_options(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``turnout`` parser: ``--version`` and one sub-command each ``_add_*_command`` adds (in help order)."""
     parser = _Parser(prog=PROG, description="Crossing-panel co-simulation: track model + vehicle FMUs.")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for add_command in (_add_run_command, _add_build_fmus_command, _add_export_ssp_command,
+                        _add_frf_command, _add_sweep_command, _add_calibrate_command,
+                        _add_diagnose_command, _add_synthesize_command, _add_figures_command):
+        add_command(sub)
+    return parser
 
+
+def _add_run_command(sub) -> None:
+    """The ``run`` sub-command: its arguments and handler."""
     run = sub.add_parser("run", help="run one co-simulation",
                          description="Run one co-simulation of SCENARIO; writes sensors.csv, results, "
                                      "summary.json and plots into DIR.")
@@ -108,6 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "model objects without the FMU boundary")
     run.set_defaults(handler=_cmd_run)
 
+
+def _add_build_fmus_command(sub) -> None:
+    """The ``build-fmus`` sub-command: its arguments and handler."""
     bld = sub.add_parser("build-fmus", help="build track.fmu, bogie.fmu and quarter.fmu",
                          description="Build the track FMU of SCENARIO (default: the default scenario) and "
                                      "the vehicle FMUs into DIR.")
@@ -120,6 +132,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="output folder (default: fmus_built)")
     bld.set_defaults(handler=_cmd_build_fmus)
 
+
+def _add_export_ssp_command(sub) -> None:
+    """The ``export-ssp`` sub-command: its arguments and handler."""
     ssp = sub.add_parser("export-ssp", help="write the co-simulation system as an SSP file",
                          description="Write SCENARIO's system (track and vehicle FMUs, connections, "
                                      "parameters) as an SSP 1.0 file for other FMI tools (libcosim, FMPy).")
@@ -127,6 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
     ssp.add_argument("--out", metavar="FILE.ssp", type=Path, required=True, help="SSP file to write")
     ssp.set_defaults(handler=_cmd_export_ssp)
 
+
+def _add_frf_command(sub) -> None:
+    """The ``frf`` sub-command: its arguments and handler."""
     frf = sub.add_parser("frf", help="receptance (frequency response) of the track",
                          description="Receptance of the track of SCENARIO at one rail point; "
                                      "writes frf.csv and frf.png into DIR.")
@@ -139,6 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
     frf.add_argument("--out", metavar="DIR", type=Path, help="output folder (default: results/<scenario name>-frf)")
     frf.set_defaults(handler=_cmd_frf)
 
+
+def _add_sweep_command(sub) -> None:
+    """The ``sweep`` sub-command: its arguments and handler."""
     swp = sub.add_parser("sweep", help="parameter study: one run per combination of values",
                          description="Run SCENARIO once per combination of the --vary values (their Cartesian "
                                      "product) or once per item of a --list file; writes one row per run to "
@@ -155,6 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_executor_options(swp)
     swp.set_defaults(handler=_cmd_sweep)
 
+
+def _add_calibrate_command(sub) -> None:
+    """The ``calibrate`` sub-command: its arguments and handler."""
     cal = sub.add_parser("calibrate", help="surrogate calibration of scenario parameters against a measurement",
                          description="Calibrate parameters of SCENARIO against a measurement (DESIGN.md section 5): "
                                      "Latin hypercube, thin-plate-spline response surface (smoothing by "
@@ -182,6 +206,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_executor_options(cal)
     cal.set_defaults(handler=_cmd_calibrate)
 
+
+def _add_diagnose_command(sub) -> None:
+    """The ``diagnose`` sub-command: its arguments and handler."""
     dia = sub.add_parser("diagnose", help="residuals -> named cause -> extended model -> gain",
                          description="Compare SCENARIO with a measured passage, screen and fit the catalogue of "
                                      "model extensions (ballast_void, ballast_stiffness, rail_pad_stiffness, "
@@ -196,6 +223,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_executor_options(dia)
     dia.set_defaults(handler=_cmd_diagnose)
 
+
+def _add_synthesize_command(sub) -> None:
+    """The ``synthesize`` sub-command: its arguments and handler."""
     syn = sub.add_parser("synthesize", help="write a synthetic measurement (a scenario with a hidden effect + noise)",
                          description="Run SCENARIO with an effect and write what its sensors would have measured "
                                      "(sampled, displacements reconstructed from accelerations, white noise), for "
@@ -211,6 +241,9 @@ def build_parser() -> argparse.ArgumentParser:
     syn.add_argument("--seed", metavar="S", type=int, default=0, help="seed of the noise and trigger time")
     syn.set_defaults(handler=_cmd_synthesize)
 
+
+def _add_figures_command(sub) -> None:
+    """The ``figures`` sub-command: its arguments and handler."""
     figs = sub.add_parser("figures", help="regenerate the source papers' figures",
                           description="Run the seed studies (resumable, on the sweep executor) and write the "
                                       "figures of seed 001 (Figs. 3-7) and seed 000 (Table 1, beam) into DIR.")
@@ -219,8 +252,6 @@ def build_parser() -> argparse.ArgumentParser:
                       help="output folder (default: results/figures)")
     _add_executor_options(figs)
     figs.set_defaults(handler=_cmd_figures)
-    return parser
-
 
 def _jobs():
     # Imported here so that `turnout --help` and scenario errors do not pay for the model's imports.
@@ -325,10 +356,10 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     out_dir = args.out if args.out is not None else RESULTS_DIR / f"{load_scenario(args.scenario).name}-diagnosis"
     result = diagnosis.diagnose(args.scenario, args.measured, out_dir, validate=args.validate, workers=args.workers,
                                 scheduler=args.scheduler, progress=not args.no_progress)
-    named = result["named_cause"]
-    where = f" at sleeper {named['sleeper']}" if "sleeper" in named else ""
-    print(f"{PROG}: diagnose: cause {named['cause']}{where}; J {result['baseline']['objective']:.4g} -> "
-          f"{named['objective']:.4g} (gain {100 * result['gain']['total']:.1f} %); report {out_dir / 'report.md'}")
+    named = result.named_cause
+    where = f" at sleeper {named.sleeper}" if named.sleeper is not None else ""
+    print(f"{PROG}: diagnose: cause {named.cause}{where}; J {result.baseline.objective:.4g} -> "
+          f"{named.objective:.4g} (gain {100 * result.gain.total:.1f} %); report {out_dir / 'report.md'}")
     return 0
 
 

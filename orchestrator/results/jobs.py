@@ -18,6 +18,7 @@ from track.frf import receptance
 from track.model import build_track
 from track.post import body_response
 from track.statics import static_equilibrium
+from track.timegrid import step_count
 
 from orchestrator.results import plots
 from orchestrator.results.analysis import analyse
@@ -50,59 +51,91 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     (divergence, a failing FMU) everything computed so far is written first and a
     :class:`UserInputError` names the cause.
     """
-    from orchestrator.cosim.master import run_cosim
-
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    res = _cosimulate(scenario, out_dir, progress, backend)
+    model = build_track(scenario.track)  # the same model (cached bodies) for post-processing
+    summary = _run_summary(scenario, backend, model, res)
+    # ---- signals first: nothing computed is lost if a later step fails
+    _write_signals(out_dir, res, _virtual_sensors(scenario, model, res))
+    Q0 = 0.5 * scenario.vehicle.axle_load
+    summary["contact"] = _contact_summary(res, Q0)
+    an = analyse(model, Q0, res)
+    summary.update(an.scalars)
+    meta = getattr(an, "meta", None)
+    if meta is not None:
+        summary.update({"crossing_rail": meta["crossing_rail"], "transition_sleeper": meta["transition_sleeper"],
+                        "crossing_side": meta["crossing_side"]})
+        _write_track_results(out_dir, scenario, model, res, an)
+    else:
+        _write_h5(out_dir / "results.h5", res)
+    _plot_signals(out_dir, scenario, model.layout, res)
+    summary["wall_seconds"]["job_total"] = time.perf_counter() - t_start
+    summary["machine"] = f"{platform.machine()} {platform.system()} py{platform.python_version()}"
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    if res.error:
+        raise UserInputError(f"{res.error} (results up to t = {res.t[-1]:.4g} s written to {out_dir})")
+    return summary
+
+
+def _cosimulate(scenario, out_dir: Path, progress: bool, backend: str):
+    """Run the co-simulation (FMU work files in ``out_dir/work``), with a progress bar; returns its result."""
+    from orchestrator.cosim.master import run_cosim
+
     sim = scenario.simulation
-    nsteps = int(round(sim.duration / sim.step))
+    nsteps = step_count(sim.duration, sim.step)
     update, close = _progress_bar(progress, nsteps, "co-simulation")
     try:
-        res = run_cosim(scenario, backend=backend, work_dir=out_dir / "work", progress=update)
+        return run_cosim(scenario, backend=backend, work_dir=out_dir / "work", progress=update)
     finally:
         close()
-    model = build_track(scenario.track)  # the same model (cached bodies) for post-processing
-    lay = model.layout
-    summary = {
+
+
+def _run_summary(scenario, backend: str, model, res) -> dict:
+    """The head of summary.json: scenario, vehicle, time grid, model size, wall times, error."""
+    sim = scenario.simulation
+    return {
         "scenario": scenario.name, "backend": backend, "algorithm": sim.algorithm,
         "vehicle": scenario.vehicle.fmu, "speed": scenario.vehicle.speed, "axle_load": scenario.vehicle.axle_load,
         "duration": float(res.t[-1]), "step": sim.step, "steps": res.stats["steps"],
         "dofs": {"reduced": model.n, "full": model.stats.fom_dofs, "bodies": model.stats.bodies},
         "wall_seconds": res.stats, "error": res.error,
     }
-    # ---- signals first: nothing computed is lost if a later step fails
-    _write_signals(out_dir, res, _virtual_sensors(scenario, model, res))
+
+
+def _contact_summary(res, Q0: float) -> dict:
+    """wheel<i> -> max and min contact force and ΔQ = max - ``Q0`` [N] (``Q0`` the static wheel load)."""
+    return {f"wheel{i + 1}": {"max_Fz": float(np.nanmax(res.Fz[:, i])),
+                              "min_Fz": float(np.nanmin(res.Fz[:, i])),
+                              "delta_Q": float(np.nanmax(res.Fz[:, i]) - Q0)} for i in range(res.Fz.shape[1])}
+
+
+def _write_track_results(out_dir: Path, scenario, model, res, an) -> None:
+    """results.h5 with the crossing rail and transition sleeper, envelopes.png and moments.png (``an.meta``)."""
+    meta = an.meta
+    rail_name, sl_name = meta["crossing_rail"], f"sleeper_{meta['transition_sleeper']}"
+    sl, rec = meta["sleeper"], res.track_record
+    j_r, j_s = meta["j_rail"], meta["j_sleeper"]
+    _write_h5(out_dir / "results.h5", res, rail_name, an.arrays["rail_x"], meta["rail_hist"], sl_name,
+              sl, meta["y_p"], meta["p_t"])
+    plots.save(plots.plot_envelopes(an.arrays["rail_x"], np.stack([an.arrays["rail_M_min"],
+                                                                   an.arrays["rail_M_max"]]),
+                                    sl.coord, np.stack([an.arrays["sleeper_M_min"], an.arrays["sleeper_M_max"]]),
+                                    meta["y_p"], an.arrays["ballast_p_max"], rail_name, sl_name),
+               out_dir / "envelopes.png")
+    inst_r = {f"t = {rec['t'][j_r]:.4f} s (max rail moment)":
+              body_response(model, rail_name, rec["q"][j_r], meta["loads_t"][j_r])}
+    inst_s = {f"t = {rec['t'][j_s]:.4f} s (max sleeper moment)": body_response(model, sl_name, rec["q"][j_s])}
+    plots.save(plots.plot_body_lines(inst_r, inst_s, f"{scenario.name}: instants of maximum moment",
+                                     rail_name, f"{sl_name} (crossing transition)",
+                                     marks_rail=[an.arrays["x_transition"][0]],
+                                     marks_sleeper=list(an.arrays["wheel_y"])), out_dir / "moments.png")
+
+
+def _plot_signals(out_dir: Path, scenario, lay, res) -> None:
+    """layout.png, contact_forces.png and displacements.png (wheels and the rail under them)."""
     wheels = range(res.Fz.shape[1])
-    Q0 = 0.5 * scenario.vehicle.axle_load
-    summary["contact"] = {f"wheel{i + 1}": {"max_Fz": float(np.nanmax(res.Fz[:, i])),
-                                            "min_Fz": float(np.nanmin(res.Fz[:, i])),
-                                            "delta_Q": float(np.nanmax(res.Fz[:, i]) - Q0)} for i in wheels}
-    an = analyse(model, Q0, res)
-    summary.update(an.scalars)
-    meta = getattr(an, "meta", None)
-    if meta is not None:
-        rail_name, sl_name = meta["crossing_rail"], f"sleeper_{meta['transition_sleeper']}"
-        summary.update({"crossing_rail": rail_name, "transition_sleeper": meta["transition_sleeper"],
-                        "crossing_side": meta["crossing_side"]})
-        sl, rec = meta["sleeper"], res.track_record
-        j_r, j_s = meta["j_rail"], meta["j_sleeper"]
-        _write_h5(out_dir / "results.h5", res, rail_name, an.arrays["rail_x"], meta["rail_hist"], sl_name,
-                  sl, meta["y_p"], meta["p_t"])
-        plots.save(plots.plot_envelopes(an.arrays["rail_x"], np.stack([an.arrays["rail_M_min"],
-                                                                       an.arrays["rail_M_max"]]),
-                                        sl.coord, np.stack([an.arrays["sleeper_M_min"], an.arrays["sleeper_M_max"]]),
-                                        meta["y_p"], an.arrays["ballast_p_max"], rail_name, sl_name),
-                   out_dir / "envelopes.png")
-        inst_r = {f"t = {rec['t'][j_r]:.4f} s (max rail moment)":
-                  body_response(model, rail_name, rec["q"][j_r], meta["loads_t"][j_r])}
-        inst_s = {f"t = {rec['t'][j_s]:.4f} s (max sleeper moment)": body_response(model, sl_name, rec["q"][j_s])}
-        plots.save(plots.plot_body_lines(inst_r, inst_s, f"{scenario.name}: instants of maximum moment",
-                                         rail_name, f"{sl_name} (crossing transition)",
-                                         marks_rail=[an.arrays["x_transition"][0]],
-                                         marks_sleeper=list(an.arrays["wheel_y"])), out_dir / "moments.png")
-    else:
-        _write_h5(out_dir / "results.h5", res)
     plots.save(plot_layout(lay), out_dir / "layout.png")
     plots.save(plots.plot_time_series(res.t, {f"wheel {i + 1}": 1e-3 * res.Fz[:, i] for i in wheels},
                                       "contact force [kN]", f"{scenario.name}: wheel-rail contact forces"),
@@ -111,12 +144,6 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     series.update({f"rail under wheel {i + 1}": 1e3 * res.rail_z[:, i] for i in wheels})
     plots.save(plots.plot_time_series(res.t, series, "vertical displacement [mm]",
                                       f"{scenario.name}: wheel and rail displacement"), out_dir / "displacements.png")
-    summary["wall_seconds"]["job_total"] = time.perf_counter() - t_start
-    summary["machine"] = f"{platform.machine()} {platform.system()} py{platform.python_version()}"
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
-    if res.error:
-        raise UserInputError(f"{res.error} (results up to t = {res.t[-1]:.4g} s written to {out_dir})")
-    return summary
 
 
 def _virtual_sensors(scenario, model, res) -> dict:

@@ -24,14 +24,25 @@ def plot_layout(layout, ax=None):
         (the lateral scale is exaggerated; the aspect ratio is not equal).
     """
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
 
     if ax is None:
         fig, ax = plt.subplots(figsize=(14, 4.5))
     else:
         fig = ax.figure
+    _draw_sleepers(ax, layout)
+    _draw_rails(ax, layout)
+    ax.set_xlabel("x along the through route [m]")
+    ax.set_ylabel("y lateral [m] (+ left)")
+    ax.set_title(_title(layout))
+    ax.autoscale_view()
+    ax.legend(loc="upper left", fontsize=7, ncol=4)
+    return fig
 
-    p = layout.params
+
+def _draw_sleepers(ax, layout) -> None:
+    """The sleepers into ``ax`` as rectangles, every ``LABEL_EVERY``-th numbered, the transition sleeper in gold."""
+    from matplotlib.patches import Rectangle
+
     transition = None
     if layout.x_transition is not None:
         transition = min(layout.sleepers, key=lambda sl: abs(sl.x - layout.x_transition)).index
@@ -45,6 +56,9 @@ def plot_layout(layout, ax=None):
         if sl.index % LABEL_EVERY == 0 or hot:
             ax.text(sl.x, sl.y_start - 0.08, str(sl.index), ha="center", va="top", fontsize=7)
 
+
+def _draw_rails(ax, layout) -> None:
+    """The plan lines by kind, the rail seats (bushing positions) as dots and the TCP into ``ax``."""
     seen = set()
     for ln in layout.lines:
         colour = KIND_COLOURS.get(ln.kind, "purple")
@@ -59,15 +73,15 @@ def plot_layout(layout, ax=None):
             {"crossing": "nose", "check": "check"}.get(r.kind, "rail")), zorder=4)
 
     if layout.x_tcp is not None:
+        p = layout.params
         y_tcp = (p.gauge / 2) * (1 if p.hand == "left" else -1)
         ax.plot([layout.x_tcp], [y_tcp], "x", color="red", ms=9, mew=2, zorder=5, label="TCP")
 
-    ax.set_xlabel("x along the through route [m]")
-    ax.set_ylabel("y lateral [m] (+ left)")
+
+def _title(layout) -> str:
+    """Track type (and for a turnout crossing, radius, hand, route), sleeper count and spacing."""
+    p = layout.params
     title = f"{p.type}"
     if p.type == "turnout":
         title += f" {p.crossing} R{p.radius:g} {p.hand} hand, route {p.route}"
-    ax.set_title(title + f", {len(layout.sleepers)} sleepers @ {p.sleeper_spacing:g} m")
-    ax.autoscale_view()
-    ax.legend(loc="upper left", fontsize=7, ncol=4)
-    return fig
+    return title + f", {len(layout.sleepers)} sleepers @ {p.sleeper_spacing:g} m"

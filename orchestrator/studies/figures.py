@@ -2,8 +2,8 @@
 
 Seed 001 (Pålsson 2020), 60E1-R760-1:15 crossing, quarter vehicle, through route:
 a sweep over speed (10-200 km/h) x impact angle (6/12/18 mrad) x rail-pad stiffness
-(120 / 1200 MN/m) on the executor and resumable store of :mod:`orchestrator.sweeps.sweep`,
-then
+(120 / 1200 MN/m) with :func:`orchestrator.sweeps.sweep.run_sweep` (its executors and
+resumable store), then
 - fig3_dQ.png: ΔQ against speed x impact angle, soft and stiff pads (seed Fig. 3);
 - fig4_rail.png: crossing-rail deflection and moment at the instant of maximum rail
   moment, 200 km/h for the three angles and 10 km/h as quasi-static reference (Fig. 4);
@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from orchestrator.results.plots import _plt, save  # the package's plotting setup (Agg backend) and writer
+
 SEED001 = "seed001/crossing_1_15_quarter.yaml"   # in the repository's scenarios/ folder
 SEED000 = "crossing_1_12_through_120.yaml"
 FRF_FMAX = 2000.0      # Hz, seed 000 Fig. 6
@@ -52,19 +54,14 @@ def seed001_variations(speeds_kmh=SPEEDS_KMH, angles=ANGLES, pads=PADS) -> dict[
             "track.rail_pad.stiffness": list(pads)}
 
 
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
 def _arrays(run_dir: Path) -> dict:
+    """The arrays a run wrote (``run_dir/arrays.npz``, :func:`orchestrator.sweeps.study.run_case`)."""
     with np.load(Path(run_dir) / "arrays.npz") as d:
         return {k: d[k] for k in d.files}
 
 
 def _pick(rows, speed, angle, pad):
+    """The row of ``speed`` [m/s], impact ``angle`` [rad] and rail-pad stiffness ``pad`` [N/m], or ``None``."""
     for r in rows:
         if (abs(r["vehicle.speed"] - speed) < 1e-6 and abs(r["track.crossing.impact_angle"] - angle) < 1e-12
                 and abs(r["track.rail_pad.stiffness"] - pad) < 1.0):
@@ -76,8 +73,23 @@ def seed001_figures(rows: list[dict], run_dir_of, out_dir: Path) -> list[Path]:
     """Figures 3-7 of seed 001 from the sweep rows (``run_dir_of(row) -> Path``)."""
     plt = _plt()
     out_dir = Path(out_dir)
-    files = []
-    # Fig. 3: ΔQ vs V·β
+    files = [_fig3_delta_q(plt, rows, out_dir)]
+    # Figs. 4-6: 200 km/h for the three angles + 10 km/h reference, soft pad
+    speeds = sorted({round(r["vehicle.speed"] / KMH) for r in rows})
+    cases = [(speeds[-1], a) for a in ANGLES] + [(speeds[0], ANGLES[0])]
+    data = []
+    for kmh, ang in cases:
+        r = _pick(rows, round(kmh * KMH, 4), ang, PADS[0])
+        if r is not None:
+            data.append((f"{kmh} km/h, {1e3 * ang:.0f} mrad", _arrays(run_dir_of(r))))
+    files += _fig45_body_lines(plt, data, out_dir)
+    files.append(_fig6_pressure(plt, data, out_dir))
+    files.append(_fig7_pads(plt, rows, run_dir_of, speeds, out_dir))
+    return files
+
+
+def _fig3_delta_q(plt, rows: list[dict], out_dir: Path) -> Path:
+    """Fig. 3: ΔQ against speed x impact angle, one panel per rail pad; returns ``fig3_dQ.png``."""
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     for ax, pad in zip(axes, PADS):
         for ang, mk in zip(ANGLES, "o^s"):
@@ -91,17 +103,17 @@ def seed001_figures(rows: list[dict], run_dir_of, out_dir: Path) -> list[Path]:
     axes[0].set_ylabel("ΔQ = Q_max - Q0 [kN]")
     axes[0].legend()
     fig.tight_layout()
-    files.append(out_dir / "fig3_dQ.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
-    # Figs. 4-6: 200 km/h for the three angles + 10 km/h reference, soft pad
-    speeds = sorted({round(r["vehicle.speed"] / KMH) for r in rows})
-    cases = [(speeds[-1], a) for a in ANGLES] + [(speeds[0], ANGLES[0])]
-    data = []
-    for kmh, ang in cases:
-        r = _pick(rows, round(kmh * KMH, 4), ang, PADS[0])
-        if r is not None:
-            data.append((f"{kmh} km/h, {1e3 * ang:.0f} mrad", _arrays(run_dir_of(r))))
+    path = out_dir / "fig3_dQ.png"
+    save(fig, path)
+    return path
+
+
+def _fig45_body_lines(plt, data: list[tuple[str, dict]], out_dir: Path) -> list[Path]:
+    """Figs. 4-5: deflection and moment of the crossing rail and the transition sleeper.
+
+    ``data`` is ``[(label, arrays of the run)]``; returns ``fig4_rail.png``, ``fig5_sleeper.png``.
+    """
+    files = []
     for name, xkey, wkey, mkey, title, xlabel in (
             ("fig4_rail.png", "rail_x", "rail_w_at_max", "rail_M_at_max",
              "crossing rail at the instant of maximum rail moment", "x [m]"),
@@ -118,33 +130,37 @@ def seed001_figures(rows: list[dict], run_dir_of, out_dir: Path) -> list[Path]:
         if data and xkey == "rail_x":
             for a_ in ax:
                 a_.axvline(data[0][1]["x_transition"][0], ls=":", c="0.5", lw=0.8)
-        ax[0].set_ylabel("vertical displacement [mm]")
-        ax[1].set_ylabel("bending moment [kN m]")
-        ax[1].set_xlabel(xlabel)
-        ax[0].set_title(title)
-        ax[0].legend(fontsize=8)
-        for a_ in ax:
-            a_.grid(alpha=0.3)
-        fig.tight_layout()
-        files.append(out_dir / name)
-        fig.savefig(files[-1], dpi=110)
-        plt.close(fig)
+        files.append(_save_two_panels(fig, ax, "bending moment [kN m]", xlabel, title, out_dir / name))
+    return files
+
+
+def _fig6_pressure(plt, data: list[tuple[str, dict]], out_dir: Path) -> Path:
+    """Fig. 6: sleeper deflection and sleeper-ballast pressure (``data`` as in Figs. 4-5); returns its path."""
     fig, ax = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
     for lab, a in data:
         ax[0].plot(a["sleeper_y"], 1e3 * a["sleeper_w_at_max"], label=lab)
         ax[1].plot(a["ballast_y"], 1e-3 * a["ballast_p_at_max_sleeper"], "o-", label=lab)
+    return _save_two_panels(fig, ax, "sleeper-ballast pressure [kPa]", "y [m]",
+                            "sleeper under the crossing transition at the instant of maximum sleeper moment",
+                            out_dir / "fig6_pressure.png")
+
+
+def _save_two_panels(fig, ax, lower_ylabel: str, xlabel: str, title: str, path: Path) -> Path:
+    """Label a (displacement over ``lower_ylabel``) pair of axes ``ax``, write ``fig`` to ``path``; returns it."""
     ax[0].set_ylabel("vertical displacement [mm]")
-    ax[1].set_ylabel("sleeper-ballast pressure [kPa]")
-    ax[1].set_xlabel("y [m]")
-    ax[0].set_title("sleeper under the crossing transition at the instant of maximum sleeper moment")
+    ax[1].set_ylabel(lower_ylabel)
+    ax[1].set_xlabel(xlabel)
+    ax[0].set_title(title)
     ax[0].legend(fontsize=8)
     for a_ in ax:
         a_.grid(alpha=0.3)
     fig.tight_layout()
-    files.append(out_dir / "fig6_pressure.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
-    # Fig. 7: soft vs stiff pad, worn crossing, 200 and 10 km/h
+    save(fig, path)
+    return path
+
+
+def _fig7_pads(plt, rows: list[dict], run_dir_of, speeds: list[int], out_dir: Path) -> Path:
+    """Fig. 7: sleeper moment, soft vs stiff pad, worn crossing, highest and lowest speed; returns its path."""
     fig, ax = plt.subplots(figsize=(8, 4))
     for kmh in (speeds[-1], speeds[0]):
         for pad, ls in zip(PADS, ("-", "--")):
@@ -159,10 +175,9 @@ def seed001_figures(rows: list[dict], run_dir_of, out_dir: Path) -> list[Path]:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    files.append(out_dir / "fig7_pads.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
-    return files
+    path = out_dir / "fig7_pads.png"
+    save(fig, path)
+    return path
 
 
 def seed000_table(out_dir: Path) -> list[Path]:
@@ -251,16 +266,12 @@ SEED000_VOID = (0.0, 0.4e-3, 0.9e-3, 0.9e-3, 0.4e-3, 0.0)   # m: DESIGN.md §4.2
 def seed000_pressure(out_dir: Path, workers: int = 2, scheduler: str | None = None,
                      progress: bool = True) -> list[Path]:
     """Seed 000's measured vs nominal vs calibrated ballast pressure (module docstring)."""
-    from track.model import reference_point
+    from track.model import build_track, reference_point
     from orchestrator.inverse.diagnose import diagnose
     from orchestrator.inverse.objective import Target
-    from orchestrator.results.plots import save
     from orchestrator.inputs.scenario import bundled_scenario, load_scenario
-    from orchestrator.cosim.sensing import simulate_sensors
-    from orchestrator.inputs.sensor_layout import layout_of
-    from orchestrator.inputs.sensor_layout import resolve
+    from orchestrator.inputs.sensor_layout import layout_of, resolve
     from orchestrator.inverse.synthetic import Effect, synthesize
-    from track.model import build_track
 
     out_dir = Path(out_dir)
     path = bundled_scenario(SEED000_MEASURED)
@@ -275,23 +286,48 @@ def seed000_pressure(out_dir: Path, workers: int = 2, scheduler: str | None = No
     layout = layout_of(sc)
     cells = [s for s in resolve(layout, model) if s.group == "A"]
     target = Target.read(measured, layout)
+    lines = _simulated_channels(target, layout, {"nominal": sc,
+                                                 "calibrated": load_scenario(work / result.extended_scenario)})
+    peak = {"measured": [np.nanmax(target.measured.channels[c.id]) for c in cells]}
+    peak.update({k: [np.nanmax(v[c.id]) for c in cells] for k, v in lines.items()})
+    csv_path = _write_pressure_table(out_dir / "seed000_pressure.csv", cells, peak)
+    png = _plot_pressure(cells, peak, target, lines, k_t, result.named_cause.to_json(),
+                         out_dir / "fig_seed000_pressure.png")
+    return [csv_path, png, work / "report.md"]
+
+
+def _simulated_channels(target, layout, scenarios: dict) -> dict[str, dict]:
+    """label -> the simulated channels of ``scenarios[label]``, aligned to ``target`` (an objective Target).
+
+    The first run fixes ``target``'s time shift when it has none yet.
+    """
+    from orchestrator.cosim.sensing import simulate_sensors
+
     lines = {}
-    for label, scen in (("nominal", sc), ("calibrated", load_scenario(work / result["extended_scenario"]))):
+    for label, scen in scenarios.items():
         run = simulate_sensors(scen, layout, reconstruct=False)
         if target.shift is None:
             target.align_to(run.t, run.signals)
         lines[label] = target.compare(run.t, run.signals).simulated
-    y = np.array([c.coord for c in cells])
-    peak = {"measured": [np.nanmax(target.measured.channels[c.id]) for c in cells]}
-    peak.update({k: [np.nanmax(v[c.id]) for c in cells] for k, v in lines.items()})
-    csv_path = out_dir / "seed000_pressure.csv"
-    with csv_path.open("w", newline="") as f:
+    return lines
+
+
+def _write_pressure_table(path: Path, cells: list, peak: dict[str, list]) -> Path:
+    """``seed000_pressure.csv``: each group-A cell's position and peak pressure, measured/nominal/calibrated."""
+    with path.open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["sensor", "y [m]", "measured peak [Pa]", "nominal peak [Pa]", "calibrated peak [Pa]"])
         for i, c in enumerate(cells):
             w.writerow([c.id, f"{c.coord:.3f}"] + [f"{peak[k][i]:.1f}" for k in ("measured", "nominal", "calibrated")])
+    return path
+
+
+def _plot_pressure(cells: list, peak: dict[str, list], target, lines: dict[str, dict], k_t: int, named: dict,
+                   path: Path) -> Path:
+    """Peak pressure per cell, and the time history of the cell the nominal model misses most; returns ``path``."""
     plt = _plt()
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    y = np.array([c.coord for c in cells])
     for label, style in (("measured", dict(c="0.3", marker="o", ls="")), ("nominal", dict(c="C0", marker="s")),
                          ("calibrated", dict(c="C3", marker="^", ls="--"))):
         ax[0].plot(y, 1e-3 * np.array(peak[label]), label=label, **style)
@@ -305,16 +341,14 @@ def seed000_pressure(out_dir: Path, workers: int = 2, scheduler: str | None = No
         ax[1].plot(t, 1e-3 * lines[label][worst.id], c=c, lw=1.0, label=label)
     ax[1].set_xlabel("time [s]")
     ax[1].set_ylabel(f"{worst.id} pressure [kPa]")
-    named = result["named_cause"]
     ax[1].set_title(f"calibrated: {named['cause']}" + (f" at sleeper {named['sleeper']}" if "sleeper" in named else ""))
     for a in ax:
         a.grid(alpha=0.3)
         a.legend(fontsize=8)
     fig.suptitle("seed 000: measured (synthetic) vs nominal vs calibrated ballast pressure")
     fig.tight_layout()
-    png = out_dir / "fig_seed000_pressure.png"
-    save(fig, png)
-    return [csv_path, png, work / "report.md"]
+    save(fig, path)
+    return path
 
 
 def make_figures(out_dir: Path, study: str = "all", workers: int = 2, scheduler: str | None = None,
@@ -331,7 +365,7 @@ def make_figures(out_dir: Path, study: str = "all", workers: int = 2, scheduler:
     files: list[Path] = []
     if study in ("seed001", "all"):
         from orchestrator.inputs.scenario import bundled_scenario
-        from orchestrator.sweeps.sweep import expand_grid
+        from orchestrator.sweeps.plan import expand_grid
         res = run_sweep(bundled_scenario(SEED001), expand_grid(seed001_variations(speeds_kmh)),
                         out_dir / "seed001_runs", workers=workers, scheduler=scheduler, progress=progress)
         if res.failed:

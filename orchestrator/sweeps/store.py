@@ -1,0 +1,195 @@
+"""The resumable on-disk store of a sweep, and the one run a worker does into it.
+
+Store (everything under ``OUT``)::
+
+    OUT/runs/<run_id>/result.json   the run is finished iff this file exists
+    OUT/runs/<run_id>/...           whatever the run function writes (arrays, ...)
+    OUT/sweep.csv                   one row per finished run, in grid order
+    OUT/sweep_<scalar>.png          each returned scalar against the first varied key
+                                    (:func:`orchestrator.sweeps.sweep.plot_sweep`)
+
+Run ids come from :func:`orchestrator.sweeps.plan.plan_sweep`. On (re)start
+finished runs are skipped; any other run is done from scratch (its folder is
+emptied first, so no file of a killed attempt survives). ``result.json`` and
+``sweep.csv`` are written atomically (temporary file in the same folder, then
+``os.replace``), so a killed worker or a killed sweep never leaves half a file behind.
+
+Workers receive only strings (base path, override texts, run folder) and load the
+scenario themselves (:func:`execute_run`), so the local and the Dask path run
+identical code.
+"""
+from __future__ import annotations
+
+import json
+import numbers
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+from orchestrator.sweeps.plan import Run, SweepPlan
+
+__all__ = ["SweepStore", "execute_run", "read_record", "table_rows", "cell_text", "write_table"]
+
+RUNS_DIR = "runs"  # OUT/runs/<run_id>/: one folder per run
+RESULT_FILE = "result.json"  # its presence marks a finished run
+TABLE_FILE = "sweep.csv"
+INDEX_COLUMN, ID_COLUMN = "index", "run_id"  # the first two columns of sweep.csv
+
+
+@dataclass(frozen=True)
+class SweepStore:
+    """The store under ``out_dir`` (layout in the module docstring).
+
+    Attributes
+    ----------
+    out_dir : Path
+        ``OUT``.
+    """
+
+    out_dir: Path
+
+    @classmethod
+    def open(cls, out_dir: str | os.PathLike) -> SweepStore:
+        """The store under ``out_dir``; creates ``OUT/runs`` if needed."""
+        store = cls(Path(out_dir))
+        store.runs_dir.mkdir(parents=True, exist_ok=True)
+        return store
+
+    @property
+    def runs_dir(self) -> Path:
+        """``OUT/runs``."""
+        return self.out_dir / RUNS_DIR
+
+    @property
+    def table(self) -> Path:
+        """``OUT/sweep.csv``."""
+        return self.out_dir / TABLE_FILE
+
+    def run_dir(self, run_id: str) -> Path:
+        """``OUT/runs/<run_id>``."""
+        return self.runs_dir / run_id
+
+    def record(self, run_id: str) -> dict | None:
+        """The finished run's record (its ``result.json``), or ``None``: see :func:`read_record`."""
+        return read_record(self.run_dir(run_id) / RESULT_FILE)
+
+    def finished(self, runs: Sequence[Run]) -> dict[str, dict]:
+        """run id -> record of those of ``runs`` that are finished on disk."""
+        records: dict[str, dict] = {}
+        for run in runs:
+            record = self.record(run.run_id)
+            if record is not None:
+                records[run.run_id] = record
+        return records
+
+    def write_table(self, plan: SweepPlan, records: Mapping[str, dict]) -> list[dict]:
+        """Write ``OUT/sweep.csv`` from the finished runs' ``records``; returns its rows (:func:`table_rows`)."""
+        rows = table_rows(plan, records)
+        write_table(rows, self.table)
+        return rows
+
+
+# --------------------------------------------------------------------------------------
+# One run (executed in a worker)
+# --------------------------------------------------------------------------------------
+def _scalar(value: Any) -> Any:
+    """A JSON scalar for ``value`` (numpy scalars included), or ``None`` for anything else."""
+    if isinstance(value, (bool, str)) or value is None:
+        return value
+    if type(value).__name__ == "bool_":  # numpy.bool_ is not a bool
+        return bool(value)
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        return float(value)
+    return None
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` so that readers see the old file or the whole new one."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "w", encoding="utf-8", newline="") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def execute_run(base_path: str, overrides: Sequence[str], run_dir: str, run_id: str, index: int,
+                run_fn: Callable | None) -> dict:
+    """Do one run in a worker: fresh run folder, scenario, ``run_fn``, ``result.json``; returns the record."""
+    from orchestrator.inputs.scenario import load_scenario
+
+    if run_fn is None:
+        from orchestrator.sweeps.study import run_case as run_fn  # imported here: tests and other studies pass their own
+    folder = Path(run_dir)
+    if folder.exists():  # files of an attempt that was killed: start from scratch
+        shutil.rmtree(folder)
+    folder.mkdir(parents=True)
+    scenario = load_scenario(base_path, overrides=list(overrides))
+    returned = run_fn(scenario, folder)
+    if not isinstance(returned, Mapping):
+        raise TypeError(f"the run function must return a mapping name -> scalar, got {type(returned).__name__}")
+    scalars = {str(k): s for k, v in returned.items() if (s := _scalar(v)) is not None}
+    record = {"run_id": run_id, "index": index, "overrides": list(overrides), "result": scalars}
+    _write_atomic(folder / RESULT_FILE, json.dumps(record, indent=1))
+    return record
+
+
+def read_record(path: Path) -> dict | None:
+    """The record in ``OUT/runs/<run_id>/result.json``, or ``None`` when absent, unreadable or another run's."""
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    ok = isinstance(record, dict) and isinstance(record.get("result"), dict) and \
+        record.get("run_id") == path.parent.name
+    return record if ok else None
+
+
+# --------------------------------------------------------------------------------------
+# Table
+# --------------------------------------------------------------------------------------
+def table_rows(plan: SweepPlan, records: Mapping[str, dict]) -> list[dict]:
+    """One row per finished run, in grid order: index, run id, varied values, returned scalars."""
+    rows = []
+    for run in plan.runs:
+        record = records.get(run.run_id)
+        if record is None:
+            continue
+        row = {INDEX_COLUMN: run.index, ID_COLUMN: run.run_id, **run.values}
+        for name, value in record["result"].items():
+            row[name if name not in row else f"result.{name}"] = value
+        rows.append(row)
+    return rows
+
+
+def cell_text(value: Any) -> str:
+    """``value`` as a CSV cell: empty for ``None``, floats read back exactly, other non-strings as JSON."""
+    if value is None:
+        return ""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, float):
+        return repr(value)  # shortest text that reads back to the same float
+    return json.dumps(value)  # ints, booleans (true/false), lists, mappings
+
+
+def write_table(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike) -> Path:
+    """Write ``rows`` as CSV (columns in first-seen order; missing cells empty), atomically."""
+    import csv
+    import io
+
+    columns: dict[str, None] = {}
+    for row in rows:
+        columns.update(dict.fromkeys(row))
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([cell_text(row.get(c)) for c in columns])
+    path = Path(path)
+    _write_atomic(path, buffer.getvalue())
+    return path
