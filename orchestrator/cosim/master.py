@@ -25,6 +25,10 @@ With ``extrapolation`` (both algorithms) the vehicle's force input is the track'
 ``Fz_coupling``: the contact force extrapolated to the middle of the step, so the
 held input integrates to second order (the track FMU computes it, so a host such as
 libcosim running the exported SSP does exactly the same).
+
+Every run reports what it did (:mod:`orchestrator.cosim.stats`): steps and wall time per
+phase from the master's clock, and in-process the track's own counters (linear solves,
+contact iterations, ...; the track FMU keeps those inside).
 """
 from __future__ import annotations
 
@@ -38,8 +42,10 @@ import numpy as np
 from orchestrator.cosim.algorithms import ALGORITHMS
 from orchestrator.cosim.passage import (POSITION_TOL, check_passage, n_wheels, our_ports, start_position,
                                         vehicle_kind)
+from orchestrator.cosim.stats import CosimStats, RunCounters
 from orchestrator.cosim.units import CosimError, FmuTrack, FmuVehicle, InProcessTrack, InProcessVehicle
 from orchestrator.inputs.errors import UserInputError
+from track.timegrid import step_count
 
 # ----------------------------------------------------------------------------- run
 @dataclass
@@ -59,8 +65,10 @@ class CosimResult:
         Rail deflection under each wheel [m].
     track_record : dict or None
         Track states at the output times (``q``, ``v``, ...), for post-processing.
-    stats : dict
-        Steps, wall time and its split, backend, algorithm.
+    stats : orchestrator.cosim.stats.CosimStats
+        Steps, wall time and its split, backend, algorithm (a dict: ``summary.json``'s
+        ``wall_seconds``), and ``stats.counters``: the stepper's work and the wall time per
+        phase (:class:`orchestrator.cosim.stats.RunCounters`).
     error : str or None
         Why the run stopped early (the arrays hold what was computed).
     track_model : track.model.TrackModel or None
@@ -127,6 +135,10 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
               algorithm: str | None = None) -> CosimResult:
     """Run the co-simulation of ``scenario``.
 
+    Stages: :func:`_set_up` (the units and the time grid), :func:`_drive` (initialize,
+    then the stepping loop of :func:`_step_loop` with ``t_k = t0 + k h``),
+    :func:`_track_record` (the recorded track states) and :func:`_result`.
+
     Parameters
     ----------
     scenario : orchestrator.inputs.scenario.Scenario
@@ -147,15 +159,68 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
     Returns
     -------
     CosimResult
+        Its ``stats`` (:class:`orchestrator.cosim.stats.CosimStats`) carry the counters of
+        the run (``stats.counters``); the track's internal ones in-process only.
     """
+    run = _set_up(scenario, backend, work_dir, fmu_dir, record_states, algorithm or scenario.simulation.algorithm)
+    signals = _Signals(run.nsteps // run.every + 1, run.vehicle.n)
+    error, t_initialize, t_loop = _drive(run, signals, progress)
+    record = _track_record(run) if record_states else None
+    return _result(run, signals, record, error, t_initialize, t_loop)
+
+
+@dataclass
+class _Run:
+    """One run after set-up: the units, the time grid and the clock.
+
+    ``step_fn`` the algorithm's step (:data:`ALGORITHMS`); ``nsteps`` communication steps
+    of ``h`` [s] from ``t0`` [s], an output every ``every`` steps; ``t_wall`` the
+    ``perf_counter`` at the start, ``t_setup`` [s] the time making the units took; ``tmp``
+    the temporary work folder (``None`` with ``work_dir``).
+    """
+
+    backend: str
+    algorithm: str
+    step_fn: Callable
+    vehicle: object
+    track: object
+    x0: float
+    h: float
+    every: int
+    nsteps: int
+    t_wall: float
+    t_setup: float
+    tmp: object = None
+    t0: float = 0.0
+
+
+class _Signals:
+    """Preallocated output arrays (``nout`` output times, ``m`` wheels); ``done`` rows are filled."""
+
+    def __init__(self, nout: int, m: int):
+        self.t = np.empty(nout)
+        self.x, self.z, self.vz, self.Fz, self.rail_z = (np.empty((nout, m)) for _ in range(5))
+        self.parts = np.empty((nout, m, 2))
+        self.done = 0
+
+    def put(self, j: int, t: float, x, z, vz, Fz, parts, rail_z) -> None:
+        """Row ``j``: time [s], wheel x, z [m], vz [m/s], contact force and its parts [N], rail deflection [m]."""
+        self.t[j], self.x[j], self.z[j], self.vz[j], self.Fz[j], self.parts[j], self.rail_z[j] = \
+            t, x, z, vz, Fz, parts, rail_z
+        self.done = j + 1
+
+
+def _set_up(scenario, backend: str, work_dir: Path | None, fmu_dir: Path | None, record_states: bool,
+            algorithm: str) -> _Run:
+    """The work folder, the time grid and the two units (timed); returns the :class:`_Run`."""
     import tempfile
 
     from track.layout import build_layout
 
     sim = scenario.simulation
     h = sim.step
-    every = max(1, int(round(sim.output_step / h)))
-    nsteps = int(round(sim.duration / h))
+    every = max(1, sim.output_every)
+    nsteps = step_count(sim.duration, h)
     layout = build_layout(scenario.track.layout)
     tmp = None
     if work_dir is None:
@@ -163,86 +228,117 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
         work_dir = Path(tmp.name)
     work_dir = Path(work_dir)
     work_dir.mkdir(parents=True, exist_ok=True)
-    algorithm = algorithm or sim.algorithm
     step_fn = ALGORITHMS[algorithm].step
     t_wall = time.perf_counter()
     vehicle, track, x0 = make_units(scenario, backend, algorithm, h, every if record_states else 0, fmu_dir,
                                     work_dir, layout)
-    t_setup = time.perf_counter() - t_wall
-    m = vehicle.n
-    nout = nsteps // every + 1
-    T = np.empty(nout)
-    X, Z, VZ, F, RZ = (np.empty((nout, m)) for _ in range(5))
-    P = np.empty((nout, m, 2))
-    error = None
-    setup_error = None
-    done = 0
+    return _Run(backend, algorithm, step_fn, vehicle, track, x0, h, every, nsteps, t_wall,
+                time.perf_counter() - t_wall, tmp)
+
+
+def _start(run: _Run, signals: _Signals) -> np.ndarray:
+    """Initialize both units, check the start position and record row 0; returns ``Fz(t0)`` [N]."""
+    vehicle, track = run.vehicle, run.track
+    if run.backend == "inprocess":
+        vehicle.initialize(run.h)
+    else:
+        vehicle.initialize(run.t0)
+        track.initialize(run.t0)
+    Fz = np.array(vehicle.Fz0, float)
+    x, z, vz = vehicle.outputs()
+    if abs(x[0] - run.x0) > POSITION_TOL:
+        raise UserInputError(
+            f"vehicle: the vehicle FMU's wheel 1 starts at x = {x[0]:.4f} m but the scenario starts it at "
+            f"{run.x0:.4f} m (simulation.x_start or the default); set the FMU's start position through "
+            "vehicle.start_values")
+    signals.put(0, run.t0, x, z, vz, Fz, np.nan, np.nan)
+    return Fz
+
+
+def _step_loop(run: _Run, signals: _Signals, Fz: np.ndarray, progress: Callable[[int, int], None] | None) -> None:
+    """The ``nsteps`` communication steps from ``Fz(t0)`` [N], recording every ``every``-th into ``signals``."""
+    step_fn, vehicle, track = run.step_fn, run.vehicle, run.track
+    h, t0, every, nsteps = run.h, run.t0, run.every, run.nsteps
+    for k in range(nsteps):
+        t = t0 + k * h  # communication points from an integer counter
+        step_fn(vehicle, track, t, h, Fz)
+        Fz = track.forces()
+        if (k + 1) % every == 0:
+            Fz_rec, parts, rail_z = track.outputs()
+            x, z, vz = vehicle.outputs()
+            signals.put((k + 1) // every, t0 + (k + 1) * h, x, z, vz, Fz_rec, parts, rail_z)
+            if progress is not None:
+                progress(k + 1, nsteps)
+
+
+def _drive(run: _Run, signals: _Signals, progress) -> tuple[str | None, float, float]:
+    """Initialize and step the units, then terminate them.
+
+    Returns (error message or ``None``, wall time of the initialization [s], wall time of
+    the loop [s]); when the run stopped early the loop's time counts from the end of the
+    set-up (initialization included, as ``summary.json`` has always had it).
+    A unit's failure (:class:`CosimError`, divergence, non-convergence, a user error) after
+    the first output keeps what was computed and returns its message; before it (nothing
+    computed) it is raised, as :class:`UserInputError` or :class:`CosimError`.
+    """
+    from track.cosim import DivergenceError
+    from track.dynamics import ConvergenceError
+
+    error = setup_error = None
+    t_initialize = 0.0
     try:
-        t0 = 0.0
-        if backend == "inprocess":
-            vehicle.initialize(h)
-        else:
-            vehicle.initialize(t0)
-            track.initialize(t0)
-        Fz = np.array(vehicle.Fz0, float)
-        x, z, vz = vehicle.outputs()
-        if abs(x[0] - x0) > POSITION_TOL:
-            raise UserInputError(
-                f"vehicle: the vehicle FMU's wheel 1 starts at x = {x[0]:.4f} m but the scenario starts it at "
-                f"{x0:.4f} m (simulation.x_start or the default); set the FMU's start position through "
-                "vehicle.start_values")
-        T[0], X[0], Z[0], VZ[0], F[0], RZ[0] = t0, x, z, vz, Fz, np.nan
-        P[0] = np.nan
-        done = 1
+        Fz = _start(run, signals)
         t_loop = time.perf_counter()
-        for k in range(nsteps):
-            t = t0 + k * h  # communication points from an integer counter
-            step_fn(vehicle, track, t, h, Fz)
-            Fz = track.forces()
-            if (k + 1) % every == 0:
-                Fz_rec, parts, rail_z = track.outputs()
-                j = (k + 1) // every
-                x, z, vz = vehicle.outputs()
-                T[j], X[j], Z[j], VZ[j], F[j], P[j], RZ[j] = t0 + (k + 1) * h, x, z, vz, Fz_rec, parts, rail_z
-                done = j + 1
-                if progress is not None:
-                    progress(k + 1, nsteps)
+        t_initialize = t_loop - run.t_wall - run.t_setup
+        _step_loop(run, signals, Fz, progress)
         t_loop = time.perf_counter() - t_loop
-    except Exception as exc:  # noqa: BLE001 - any failure keeps what was computed
-        from track.cosim import DivergenceError
-        from track.dynamics import ConvergenceError
-        if not isinstance(exc, (CosimError, DivergenceError, ConvergenceError, UserInputError)):
-            raise
-        if done == 0:  # failed while setting up: nothing computed, report it as such
+    except (CosimError, DivergenceError, ConvergenceError, UserInputError) as exc:
+        if signals.done == 0:  # failed while setting up: nothing computed, report it as such
             setup_error = exc
         error = str(exc)
-        t_loop = time.perf_counter() - t_wall - t_setup
+        t_loop = time.perf_counter() - run.t_wall - run.t_setup
     finally:
-        for u in (vehicle, track):
+        for u in (run.vehicle, run.track):
             try:
                 u.terminate()
             except Exception:  # noqa: BLE001 - an FMU that failed may refuse to terminate
                 pass
     if setup_error is not None:
-        if tmp is not None:
-            tmp.cleanup()
+        if run.tmp is not None:
+            run.tmp.cleanup()
         raise setup_error if isinstance(setup_error, UserInputError) else CosimError(str(setup_error))
-    record = None
-    if record_states:
-        if backend == "inprocess":
-            record = track.record()
-        elif getattr(track, "record_file", None) is not None and track.record_file.exists():
-            with np.load(track.record_file) as d:
-                record = {k: d[k] for k in d.files}
-    stats = {"backend": backend, "algorithm": algorithm, "step": h, "steps": min(nsteps, (done - 1) * every),
-             "output_every": every, "wheels": m, "x_front_start": x0,
-             "wall_setup": t_setup, "wall_loop": t_loop, "wall_total": time.perf_counter() - t_wall}
-    if tmp is not None:
-        tmp.cleanup()
-    sl = slice(0, done)
-    return CosimResult(t=T[sl], x=X[sl], z=Z[sl], vz=VZ[sl], Fz=F[sl], parts=P[sl], rail_z=RZ[sl],
-                       track_record=record, stats=stats, error=error,
-                       track_model=track.model if backend == "inprocess" else None)
+    return error, t_initialize, t_loop
+
+
+def _track_record(run: _Run) -> dict | None:
+    """The track states recorded at the output times (in-process: from the unit; FMU: its ``.npz``)."""
+    if run.backend == "inprocess":
+        return run.track.record()
+    rec = getattr(run.track, "record_file", None)
+    if rec is not None and rec.exists():
+        with np.load(rec) as d:
+            return {k: d[k] for k in d.files}
+    return None
+
+
+def _result(run: _Run, signals: _Signals, record: dict | None, error: str | None, t_initialize: float,
+            t_loop: float) -> CosimResult:
+    """The :class:`CosimResult` of the ``signals.done`` recorded rows, with the run's stats and counters."""
+    steps = min(run.nsteps, (signals.done - 1) * run.every)
+    m = run.vehicle.n
+    wall_total = time.perf_counter() - run.t_wall
+    counters = RunCounters.measured(steps, run.t_setup, t_initialize, t_loop - t_initialize if error else t_loop,
+                                    wall_total, run.track.work())
+    stats = CosimStats({"backend": run.backend, "algorithm": run.algorithm, "step": run.h, "steps": steps,
+                        "output_every": run.every, "wheels": m, "x_front_start": run.x0,
+                        "wall_setup": run.t_setup, "wall_loop": t_loop, "wall_total": wall_total}, counters)
+    if run.tmp is not None:
+        run.tmp.cleanup()
+    sl = slice(0, signals.done)
+    s = signals
+    return CosimResult(t=s.t[sl], x=s.x[sl], z=s.z[sl], vz=s.vz[sl], Fz=s.Fz[sl], parts=s.parts[sl],
+                       rail_z=s.rail_z[sl], track_record=record, stats=stats, error=error,
+                       track_model=run.track.model if run.backend == "inprocess" else None)
 
 
 __all__ = ["CosimError", "CosimResult", "make_units", "run_cosim"]

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from orchestrator.inputs.errors import UserInputError
-from orchestrator.inputs.scenario import PortMap
+from orchestrator.inputs.specs import PortMap
 
 POSITION_TOL = 1e-6  # m: the vehicle's wheel 1 must start where the scenario puts it
 START_MARGIN_SLEEPERS = 2  # the rear wheelset starts this many sleepers inside the panel

@@ -11,12 +11,13 @@ FMPy's low-level API.
 from __future__ import annotations
 
 import ctypes
+import time
 from pathlib import Path
 
 import numpy as np
 
 from orchestrator.inputs.errors import UserInputError
-from orchestrator.inputs.scenario import PortMap
+from orchestrator.inputs.specs import PortMap
 
 
 class CosimError(UserInputError):
@@ -83,7 +84,9 @@ class InProcessTrack:
         from track.cosim import TrackCosim
         from track.model import build_track
 
+        t_start = time.perf_counter()
         self.model = build_track(scenario.track)
+        self.wall_build = time.perf_counter() - t_start  # [s] (short when the bodies are cached)
         self.engine = TrackCosim(scenario.track, n_wheels, 0.5 * scenario.vehicle.axle_load, h,
                                  speed=scenario.vehicle.speed, extrapolate=extrapolate,
                                  record_every=record_every, model=self.model,
@@ -102,6 +105,13 @@ class InProcessTrack:
 
     def record(self) -> dict:
         return self.engine.record.arrays()
+
+    def work(self) -> dict:
+        """The track's own work: counters of :class:`track.dynamics.Counters` and wall times [s]."""
+        e, c = self.engine, self.engine.counters
+        return {"track_steps": c.steps, "linear_solves": c.solves, "contact_iterations": c.contact_newton,
+                "passes": c.iterations, "factorizations": c.factorizations, "wall_build": self.wall_build,
+                "wall_statics": e.wall_statics, "wall_factor": e.wall_factor}
 
     def get_state(self):
         return self.engine.get_state()
@@ -269,6 +279,10 @@ class FmuTrack:
         o = self._out.get()
         n = self.n
         return o[:n].copy(), np.stack([o[n:2 * n], o[2 * n:3 * n]], axis=1), o[3 * n:].copy()
+
+    def work(self) -> dict:
+        """Nothing: the track FMU's counters stay inside it (in-process backend only)."""
+        return {}
 
     def terminate(self) -> None:
         self.unit.terminate()

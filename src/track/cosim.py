@@ -19,12 +19,13 @@ coupled run without a drop transient.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .contact import HERTZ_CONSTANT, CrossingGeometry, DippedJoint, Flat, hertz_deflection
-from .dynamics import ALPHA_DEFAULT, PointLoad, TrackIntegrator
+from .dynamics import ALPHA_DEFAULT, Counters, PointLoad, TrackIntegrator
 from .model import TrackModel, build_track
 from .params import TrackParams
 from .statics import static_equilibrium
@@ -124,6 +125,8 @@ class TrackCosim:
         self.rail_w = np.zeros(self.n)      # rail deflection under each wheel [m]
         self.record = Record()
         self._limit = DIVERGENCE_FACTOR * self.Q0
+        self.wall_statics = 0.0             # wall time of the static equilibrium at initialization [s]
+        self.wall_factor = 0.0              # ... and of the integrator's set-up (step-matrix LU) [s]
 
     # ------------------------------------------------------------------ geometry
     def surfaces(self, i: int, x: float, body: str) -> tuple[float, float]:
@@ -150,18 +153,28 @@ class TrackCosim:
     def initialized(self) -> bool:
         return self.integ is not None
 
+    @property
+    def counters(self) -> Counters:
+        """The integrator's work counters (steps, solves, passes, contact Newton sweeps); zeros
+        before the first step."""
+        return self.integ.counters if self.integ is not None else Counters()
+
     def initialize(self, x: np.ndarray, z: np.ndarray, t0: float = 0.0) -> None:
         """Static equilibrium under the static wheel loads at x; offsets from the vehicle's z."""
         x = np.asarray(x, float)
+        t_start = time.perf_counter()
         pts, surf = self._points(x)
         loads = [PointLoad(p, -q) for p, q in zip(pts, self.Q0)]
         st = static_equilibrium(self.model, [(ld.point, ld.force) for ld in loads])
+        self.wall_statics = time.perf_counter() - t_start
         self.static = st
         w = np.array([p.value(st.q, -q) for p, q in zip(pts, self.Q0)])
         top = np.array([max(s) for s in surf])
         self.z_static = top + w - np.array([hertz_deflection(q, self.c_h) for q in self.Q0])
         self.offset = self.z_static - np.asarray(z, float) if self.auto_offset else np.zeros(self.n)
+        t_start = time.perf_counter()
         self.integ = TrackIntegrator(self.model, self.h, st.q, loads0=loads, alpha=self.alpha)
+        self.wall_factor = time.perf_counter() - t_start
         self.integ.t0 = t0
         self.rail_w = w
         self.Fz = self.Q0.copy()

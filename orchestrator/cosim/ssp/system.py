@@ -1,0 +1,236 @@
+"""The scenario's co-simulation system (:func:`export_ssp`): its components, parameter
+values and connections, written with :func:`orchestrator.cosim.ssp.writer.write_ssp`.
+
+The system (DESIGN.md §4.4)
+---------------------------
+Two components, ``vehicle`` and ``track``. Per wheel ``i`` (front wheelset left,
+right, then the next), four connections::
+
+    vehicle.wheel{i}_x  -> track.wheel{i}_x
+    vehicle.wheel{i}_z  -> track.wheel{i}_z      (x z_sign  for a third-party vehicle)
+    vehicle.wheel{i}_vz -> track.wheel{i}_vz     (x vz_sign)
+    track.wheel{i}_Fz_coupling -> vehicle.wheel{i}_Fz   (x Fz_sign; the contact force,
+                                 extrapolated to mid-step with extrapolate_force)
+
+A third-party vehicle uses its own variable names from ``vehicle.ports``. A sign of -1
+becomes an ``ssc:LinearTransformation factor="-1"`` on that connection: the FMU's
+value times the sign is the value in our convention, so vehicle -> track multiplies
+by the sign and track -> vehicle multiplies by 1/sign = sign.
+
+Parameter values:
+
+* track: ``speed``, ``static_wheel_load = axle_load / 2``, ``extrapolate =
+  simulation.extrapolation`` (true by default, and it should stay true: libcosim and
+  FMPy are Jacobi masters, the track's wheel inputs are those of the previous
+  communication point, and the stiff Hertz contact needs them extrapolated over the
+  step, DESIGN.md §8; false holds them, as ``turnout run`` with ``algorithm: jacobi``
+  and ``extrapolation: false`` does), ``h1`` (ballast stiffness scale), ``h2``
+  (rail-pad stiffness scale) and ``impact_angle`` from the scenario (only those the
+  track FMU declares).
+* our vehicles: ``speed``, ``axle_load``, ``x0`` (track coordinate of the front
+  wheelset at t = 0: ``simulation.x_start`` if set, else :func:`default_x_start`:
+  the position where the rearmost wheelset stands ``START_MARGIN_SLEEPERS`` (2) sleeper
+  spacings after the first sleeper, the choice ``turnout run`` makes too), then the
+  scenario's ``vehicle.start_values``.
+* a third-party vehicle: ``vehicle.start_values`` only (its speed and start position
+  are its own parameters, e.g. ``{"v": 33.333, "s0": 4.1}``; the track's ``speed`` is
+  the scenario's ``vehicle.speed``).
+
+With our vehicles the run must keep the wheels on the modelled panel over
+``simulation.duration`` (the check of ``turnout run``, :func:`orchestrator.cosim.passage.check_passage`);
+otherwise :class:`UserInputError`. A third-party vehicle's start position is its own
+parameter and is not checked.
+
+Default experiment: start 0, stop ``simulation.duration``, and the communication
+step ``simulation.step`` in the OSP annotation that libcosim reads
+(``ssd:DefaultExperiment/ssd:Annotations/ssc:Annotation[type="com.opensimulationplatform"]
+/osp:Algorithm/osp:FixedStepAlgorithm@baseStepSize``); SSP 1.0 itself has no step size.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import tempfile
+import zipfile
+from pathlib import Path
+
+from orchestrator.cosim import passage
+from orchestrator.cosim.ssp.ssd import TRACK, VEHICLE, Component, Connection, step_ns
+from orchestrator.cosim.ssp.writer import model_variables, write_ssp
+from orchestrator.inputs.errors import UserInputError
+
+
+def _n_wheels(scenario) -> int:
+    """Wheels of the scenario's vehicle; a third-party FMU must list its ports."""
+    veh = scenario.vehicle
+    if not veh.builtin and not veh.ports:
+        raise UserInputError(f"vehicle.ports: the third-party vehicle FMU {veh.fmu} needs one ports entry "
+                             "per wheel (DESIGN.md 4.4)")
+    return passage.n_wheels(scenario)
+
+
+def system_connections(scenario) -> list[Connection]:
+    """The connections of the scenario's system (4 per wheel, see the module docstring)."""
+    veh = scenario.vehicle
+    out = []
+    for i in range(_n_wheels(scenario)):
+        w = f"wheel{i + 1}_"
+        if veh.builtin:
+            x, z, vz, fz, sz, svz, sfz = w + "x", w + "z", w + "vz", w + "Fz", 1, 1, 1
+        else:
+            p = veh.ports[i]
+            x, z, vz, fz, sz, svz, sfz = p.x, p.z, p.vz, p.Fz, p.z_sign, p.vz_sign, p.Fz_sign
+        out += [Connection(VEHICLE, x, TRACK, w + "x"),
+                Connection(VEHICLE, z, TRACK, w + "z", float(sz)),
+                Connection(VEHICLE, vz, TRACK, w + "vz", float(svz)),
+                # our Fz = FMU Fz * sign  ->  FMU Fz = our Fz / sign = our Fz * sign; the
+                # coupling output (extrapolated to mid-step when extrapolate_force) feeds it
+                Connection(TRACK, w + "Fz_coupling", VEHICLE, fz, float(sfz))]
+    return out
+
+
+def default_x_start(scenario) -> float:
+    """Default track coordinate of the front wheelset at t = 0 [m]: the master's choice
+    (:func:`orchestrator.cosim.passage.start_position`), so the SSP and ``turnout run`` agree."""
+    from track.layout import build_layout
+
+    sc = scenario
+    if sc.simulation.x_start is not None:  # the default, not the scenario's value
+        sc = dataclasses.replace(sc, simulation=dataclasses.replace(sc.simulation, x_start=None))
+    return passage.start_position(sc, build_layout(scenario.track.layout))
+
+
+RUN_PARAMETERS = ("speed", "static_wheel_load", "extrapolate", "extrapolate_force")  # every track FMU has
+                                                   # them (and bakes the scenario's values as their defaults)
+
+
+def track_parameters(scenario) -> dict:
+    """Parameter values of the track component (before filtering against the FMU).
+
+    The run parameters (:data:`RUN_PARAMETERS`) and the scenario-parameter bindings
+    (``h1``, ``h2``, ``impact_angle``: bound only where the track FMU declares them,
+    a plain-track FMU may have no impact angle). The one place that maps scenario keys
+    onto track FMU parameters.
+    """
+    t, v = scenario.track, scenario.vehicle
+    return {"speed": float(v.speed), "static_wheel_load": 0.5 * float(v.axle_load),
+            "extrapolate": bool(scenario.simulation.extrapolation),
+            "extrapolate_force": bool(scenario.simulation.extrapolation),
+            "h1": float(t.ballast.stiffness_scale), "h2": float(t.rail_pad.stiffness_scale),
+            "impact_angle": float(t.impact_angle)}
+
+
+def vehicle_parameters(scenario) -> dict:
+    """Parameter values of the vehicle component (see the module docstring)."""
+    veh, sim = scenario.vehicle, scenario.simulation
+    start_values = dict(veh.start_values)
+    if not veh.builtin:
+        return start_values
+    x0 = float(sim.x_start) if sim.x_start is not None else default_x_start(scenario)
+    values = {"speed": float(veh.speed), "axle_load": float(veh.axle_load), "x0": x0}
+    for key in ("speed", "axle_load", "x0"):
+        given = start_values.get(key, values[key])
+        if isinstance(given, bool) or not isinstance(given, (int, float)) or float(given) != values[key]:
+            where = {"speed": "vehicle.speed", "axle_load": "vehicle.axle_load", "x0": "simulation.x_start"}[key]
+            raise UserInputError(f"vehicle.start_values: {key!r} = {start_values[key]!r} contradicts "
+                                 f"{where} ({values[key]!r}); give it there only")
+    values.update(start_values)
+    return values
+
+
+TRACK_RESOURCE = "resources/track_fmu.json"  # the track FMU's baked parameters (fmus.track_fmu)
+
+
+def _track_fmu_matches(fmu: Path, track_params, n_wheels: int) -> bool:
+    """True when ``fmu`` is a track FMU baked from ``track_params`` for ``n_wheels`` wheels."""
+    try:
+        with zipfile.ZipFile(fmu) as zf:
+            baked = json.loads(zf.read(TRACK_RESOURCE))
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return False
+    wanted = json.loads(json.dumps(dataclasses.asdict(track_params)))
+    return baked.get("n_wheels") == n_wheels and baked.get("track") == wanted
+
+
+def _track_fmu(scenario, n_wheels: int, fmu_dir: Path | None, tmp: Path) -> Path:
+    """The scenario's track FMU: the one in ``fmu_dir`` if it matches, else built (into ``fmu_dir`` or ``tmp``)."""
+    if fmu_dir is not None and _track_fmu_matches(Path(fmu_dir) / "track.fmu", scenario.track, n_wheels):
+        return Path(fmu_dir) / "track.fmu"
+    from fmus.build import build_track_fmu
+
+    values = track_parameters(scenario)
+    defaults = {k: values[k] for k in RUN_PARAMETERS}
+    return Path(build_track_fmu(scenario.track, n_wheels, Path(fmu_dir) if fmu_dir is not None else tmp,
+                                **defaults))
+
+
+def _vehicle_fmu(scenario, fmu_dir: Path | None, tmp: Path) -> Path:
+    """The vehicle FMU: the third-party file, ours from ``fmu_dir``, or ours built into
+    ``fmu_dir`` (or ``tmp``)."""
+    kind = scenario.vehicle.fmu
+    if not scenario.vehicle.builtin:
+        path = Path(kind)
+        if not path.is_file():
+            raise UserInputError(f"vehicle.fmu: {kind}: file not found")
+        return path
+    if fmu_dir is not None and (Path(fmu_dir) / f"{kind}.fmu").is_file():
+        return Path(fmu_dir) / f"{kind}.fmu"
+    from fmus.build import build_fmu
+
+    return Path(build_fmu(kind, Path(fmu_dir) if fmu_dir is not None else tmp))
+
+
+def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
+    """Write the scenario's co-simulation system as an SSP file.
+
+    Parameters
+    ----------
+    scenario : orchestrator.inputs.scenario.Scenario
+    out_file : Path
+        The ``.ssp`` file to write (its folder is created; an existing file is replaced).
+    fmu_dir : Path, optional
+        Folder of prebuilt FMUs: ``bogie.fmu`` / ``quarter.fmu`` are taken from there when
+        present, and ``track.fmu`` when its baked parameters (``resources/track_fmu.json``)
+        are this scenario's track and number of wheels; otherwise they are built into it
+        (replacing a ``track.fmu`` of another track). Without it the FMUs are built in a
+        temporary folder.
+
+    Returns
+    -------
+    Path
+        ``out_file``.
+
+    Raises
+    ------
+    UserInputError
+        A third-party FMU or a port/parameter name that does not fit, contradictory
+        start values, a step that is not a whole number of nanoseconds.
+    """
+    out_file = Path(out_file)
+    try:
+        step_ns(scenario.simulation.step)
+    except UserInputError as exc:
+        raise UserInputError(f"simulation.step: {exc}") from None
+    n = _n_wheels(scenario)
+    vehicle_values = vehicle_parameters(scenario)
+    if scenario.vehicle.builtin:  # the wheels must stay on the modelled panel (as in `turnout run`)
+        from track.layout import build_layout
+
+        passage.check_passage(scenario, build_layout(scenario.track.layout), vehicle_values["x0"])
+    with tempfile.TemporaryDirectory(prefix="xpanel_ssp_") as tmp:
+        tmp = Path(tmp)
+        vehicle_fmu = _vehicle_fmu(scenario, fmu_dir, tmp)
+        track_fmu = _track_fmu(scenario, n, fmu_dir, tmp)
+        declared = model_variables(track_fmu)
+        # the bindings only where the track FMU declares them; the run parameters are required
+        track_values = {k: v for k, v in track_parameters(scenario).items()
+                        if k in RUN_PARAMETERS or k in declared}
+        components = [Component(VEHICLE, vehicle_fmu, vehicle_values),
+                      Component(TRACK, track_fmu, track_values)]
+        sim = scenario.simulation
+        return write_ssp(out_file, components, system_connections(scenario), name=scenario.name,
+                         start_time=0.0, stop_time=float(sim.duration), step_size=float(sim.step))
+
+
+__all__ = ["export_ssp", "system_connections", "track_parameters", "vehicle_parameters", "default_x_start",
+           "RUN_PARAMETERS"]
