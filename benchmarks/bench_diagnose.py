@@ -58,7 +58,7 @@ def part_time(workers: int) -> str:
     with tempfile.TemporaryDirectory() as tmp:
         synthesize(sc, effect, Path(tmp) / "passage.csv", seed=7)
         t0 = time.perf_counter()
-        res = diagnose(path, Path(tmp) / "passage.csv", Path(tmp) / "out", workers=workers, progress=False)
+        res = diagnose(path, Path(tmp) / "passage.csv", Path(tmp) / "out", workers=workers, progress=False).to_json()
         wall = time.perf_counter() - t0
     named = res["named_cause"]
     return (f"default scenario (bogie, 0.5 s at 1e-4 s), hidden void at sleeper {effect.sleeper} "
@@ -80,7 +80,8 @@ def confusion_rows(seeds: int, workers: int) -> list[tuple]:
             effect = hidden_effect(seed, kind, sleepers)
             with tempfile.TemporaryDirectory() as tmp:
                 synthesize(sc, effect, Path(tmp) / "p.csv", seed=seed)
-                res = diagnose(path, Path(tmp) / "p.csv", Path(tmp) / "out", workers=workers, progress=False)
+                res = diagnose(path, Path(tmp) / "p.csv", Path(tmp) / "out", workers=workers,
+                               progress=False).to_json()
             named = res["named_cause"]
             ok_sleeper = effect.sleeper is None or (
                 named["cause"] == effect.cause and effect.sleeper in named["ambiguity"]["sleepers"]

@@ -73,7 +73,8 @@ def test_hidden_effect_is_named_fitted_and_gains(setup, tmp_path, kind, seed):
         synthesize(slow, effect, tmp_path / "passage_100.h5", seed=seed + 1000)
         validate = [f"{tmp_path / 'passage_100.h5'}@{VALIDATION_SPEED}"]
 
-    result = diagnose(SCENARIO, tmp_path / "passage.csv", tmp_path / "out", validate=validate, progress=False)
+    result = diagnose(SCENARIO, tmp_path / "passage.csv", tmp_path / "out", validate=validate,
+                      progress=False).to_json()
 
     named = result["named_cause"]
     print(f"\n{kind}: truth {effect.as_dict()}; named {named['cause']} {named.get('sleeper', '')} "
@@ -151,3 +152,40 @@ def test_cli_bad_input_is_one_line_exit_2(tmp_path, capsys, monkeypatch, make, e
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and words in err, err
+
+
+def test_diagnosis_round_trips_through_json():
+    """A hand-made :class:`Diagnosis` (a named local cause, a global candidate, a validation
+    passage) survives to_json -> JSON text -> from_json unchanged, and its JSON has the keys of
+    diagnosis.json (DESIGN.md §4.5) in their order: a local cause carries ``sleeper``, a global
+    one does not, only the named cause carries ``ambiguity``. No simulation."""
+    import json
+
+    from orchestrator.inverse.diagnosis import Baseline, CauseFit, Diagnosis, Gain, Passage
+
+    evidence = {"stage": "fitted", "objective_reduction": 0.3, "chi2": 1.2e4, "n_samples": 9000, "n_parameters": 6,
+                "bic": 1.25e4, "delta_bic_vs_nominal": 4.1e3, "delta_bic_vs_best": 0.0,
+                "indistinguishable_from": ["ballast_void@22"]}
+    void = CauseFit("ballast_void", {"gaps": [0.0, 4e-4, 9e-4, 9e-4, 4e-4, 0.0]}, 0.06, 0.85, evidence, sleeper=21)
+    bed = CauseFit("ballast_stiffness", {"stiffness_scale": 0.7}, 0.3, 0.27, dict(evidence, stage="confirmed"))
+    named = CauseFit(void.cause, void.parameters, void.objective, void.gain, evidence, sleeper=21,
+                     ambiguity={"candidates": ["ballast_void@21", "ballast_void@22"], "sleepers": [21, 22]})
+    diagnosis = Diagnosis(
+        "scenarios/x.yaml", "p.csv",
+        Baseline(0.41, 1e-3, 1.6e4, 9000, {"A": 0.4}, {"A1": {"rmse": 1.2e4, "nrmse": 0.35}}, 1.6e4,
+                 {"groups": {"A": 0.4}, "sleepers": {"21": 0.4}, "worst_channels": []}, {"A1": 120.0}),
+        [void, bed], named, "extended.yaml", Gain(0.85, {"A1": 0.8}),
+        [Passage("p2.h5", 27.78, 0.39, 0.07, 1 - 0.07 / 0.39, {"A1": {"nrmse_before": 0.3, "nrmse_after": 0.05}})],
+        120, 300.5, {"delta_bic": 10.0, "confirm": 4, "fit": 2, "sensor_reach": 0, "candidates": ["ballast_void@21"]})
+
+    data = json.loads(json.dumps(diagnosis.to_json()))
+    assert Diagnosis.from_json(data) == diagnosis
+    assert Diagnosis.from_json(data).to_json() == data
+    assert list(data) == ["scenario", "measured", "baseline", "causes", "named_cause", "extended_scenario", "gain",
+                          "validation", "runs", "wall_seconds", "settings"]
+    assert list(data["named_cause"]) == ["cause", "sleeper", "parameters", "objective", "gain", "evidence",
+                                         "ambiguity"]
+    assert list(data["causes"][1]) == ["cause", "parameters", "objective", "gain", "evidence"]
+    none = CauseFit("none", {}, 0.41, 0.0, {"best_candidate": "impact_angle", "delta_bic_vs_nominal": 3.0,
+                                            "threshold": 10.0, "reason": "noise"})
+    assert CauseFit.from_json(none.to_json()) == none and "sleeper" not in none.to_json()

@@ -12,7 +12,8 @@ The procedure (DESIGN.md §4.5; every threshold is a named constant below):
    magnitudes of its screening grid. Between grid points the *signals* are
    interpolated (monotone cubic in the magnitude, log scale for stiffness factors),
    so each candidate's best magnitude and objective come from a dense 1-D search
-   without further runs.
+   without further runs (:func:`orchestrator.inverse.screening.dense_search`, on
+   :data:`~orchestrator.inverse.screening.DENSE` points).
 3. **Confirmation.** The :data:`CONFIRM` best candidates are re-run at their best
    magnitude.
 4. **Fit.** Every confirmed candidate is fitted coarsely (a void as a wedge, see
@@ -38,6 +39,12 @@ The procedure (DESIGN.md §4.5; every threshold is a named constant below):
 
 The diagnosis sees only the scenario and the measurement files: the catalogue, the
 grids and the thresholds are fixed here, the same for every measurement.
+
+:func:`diagnose` runs these steps as a sequence of stages (one function each, from
+:func:`_read_inputs` to :func:`_write_outputs`) and returns the typed result,
+:class:`orchestrator.inverse.diagnosis.Diagnosis`, whose ``to_json()`` is
+``diagnosis.json``; the runs and the screening search are in
+:mod:`orchestrator.inverse.screening`, the report in :mod:`orchestrator.inverse.diagnose_report`.
 """
 from __future__ import annotations
 
@@ -50,63 +57,24 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.inverse.causes import Candidate, candidates, kind_of
-from orchestrator.inputs.errors import UserInputError
-from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.cosim.sensing import variant_for_speed
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inverse.causes import Candidate, candidates, kind_of
+from orchestrator.inverse.diagnosis import Baseline, CauseFit, Diagnosis, Gain, Passage
+from orchestrator.inverse.objective import Comparison, Target
+from orchestrator.inverse.screening import Evaluated, Pool, comparison, dense_search, scalar_axis
 
 DELTA_BIC = 10.0     # BIC difference for "very strong" evidence (Kass & Raftery 1995)
 CONFIRM = 4          # candidates re-run at their screened optimum
 FIT = 2              # candidates whose full parameter set is fitted, at most ...
 FIT_RATIO = 2.0      # ... of those whose confirmed chi-square is within this factor of the best's
-DENSE = 121          # points of the 1-D search between screening runs
 FIT_MAX_NFEV = 5     # least-squares iterations of a coarse fit (each: one run + a parallel Jacobian) ...
 FINE_MAX_NFEV = 8    # ... and of the fine stages (six gaps)
 SENSOR_REACH = 0     # local causes on the sleepers carrying sensors +- this many
 
 
-@dataclass
-class Evaluated:
-    """One candidate at one parameter vector, with its comparison."""
-
-    candidate: Candidate
-    values: np.ndarray
-    cmp: Comparison
-    k: int
-    stage: str
-
-    def bic(self) -> float:
-        return self.cmp.chi2 + self.k * math.log(self.cmp.n)
-
-
-@dataclass
-class _Pool:
-    """Runs of scenario variants on an executor (local processes or Dask)."""
-
-    executor: object
-    base_dir: str
-    layout_path: str | None
-    runs: int = 0
-    wall: float = 0.0
-    bar: object = None
-
-    def map(self, raws: list[dict]) -> list:
-        from orchestrator.cosim.sensing import sensors_job
-
-        t0 = time.perf_counter()
-        futures = [self.executor.submit(sensors_job, raw, self.base_dir, self.layout_path) for raw in raws]
-        out = []
-        for f in futures:
-            run = f.result()
-            out.append(run)
-            if self.bar is not None:
-                self.bar.update(1)
-        self.runs += len(raws)
-        self.wall += time.perf_counter() - t0
-        return out
-
-
 def _parse_validate(texts) -> list[tuple[Path, float]]:
+    """``--validate`` texts ``FILE@SPEED`` as (path, speed [m/s]); :class:`UserInputError` if malformed."""
     out = []
     for text in texts or ():
         path, sep, speed = str(text).rpartition("@")
@@ -121,6 +89,7 @@ def _parse_validate(texts) -> list[tuple[Path, float]]:
 
 
 def _sensor_sleepers(sensors) -> list[int]:
+    """Indices of the sleepers carrying sensors, sorted."""
     out = set()
     for s in sensors:
         if s.body.startswith("sleeper_"):
@@ -141,34 +110,6 @@ def _where(cmp: Comparison, sensors) -> dict:
                                 "window": cmp.channels[k]["window"]} for k in worst]}
 
 
-def _scalar_axis(kind, raw: dict, sleeper) -> tuple[np.ndarray, float]:
-    """Screening magnitudes with the nominal one, sorted, and the nominal magnitude."""
-    nominal = float(np.max(kind.nominal(raw, sleeper))) if kind.name == "ballast_void" else \
-        float(kind.nominal(raw, sleeper)[0])
-    grid = sorted(set([nominal] + [g for g in kind.grid if abs(g - nominal) > 1e-12]))
-    return np.array(grid, float), nominal
-
-
-def _dense_search(target: Target, kind, xs: np.ndarray, signals: list[dict]) -> tuple[float, Comparison]:
-    """Best magnitude of a 1-D family of runs by interpolating their signals (module doc, step 2)."""
-    from scipy.interpolate import PchipInterpolator
-
-    u = np.log(xs) if kind.log else xs
-    ids = list(signals[0])
-    Y = np.stack([np.concatenate([sig[k] for k in ids]) for sig in signals])   # (nx, total)
-    sizes = np.cumsum([0] + [signals[0][k].size for k in ids])
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):   # flat stretches of a signal
-        interp = PchipInterpolator(u, Y, axis=0)
-    best = None
-    for ud in np.linspace(u[0], u[-1], DENSE):
-        row = interp(ud)
-        on = {k: row[sizes[i]:sizes[i + 1]] for i, k in enumerate(ids)}
-        cmp = target.score(on)
-        if best is None or cmp.chi2 < best[1].chi2:
-            best = (float(np.exp(ud) if kind.log else ud), cmp)
-    return best
-
-
 def _stages(kind) -> list:
     """Coarse-to-fine parameterisations of a fit: (number of parameters, map to the unit cube).
 
@@ -183,7 +124,7 @@ def _stages(kind) -> list:
     return [(2, lambda p: np.linspace(p[0], p[1], n)), (n, lambda p: np.asarray(p, float))]
 
 
-def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated, stages: slice = slice(None),
+def _fit(pool: Pool, target: Target, raw: dict, start: Evaluated, stages: slice = slice(None),
          max_nfev: int = FIT_MAX_NFEV) -> Evaluated:
     """A candidate's parameters by bounded least squares, through ``_stages(kind)[stages]`` (module doc, step 4)."""
     from orchestrator.inverse.fitting import fit_unit_cube
@@ -197,7 +138,7 @@ def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated, stages: slice
         if todo:
             out = pool.map([kind.apply(raw, c.sleeper, kind.from_unit(u)) for u in todo])
             for u, run in zip(todo, out):
-                cache[u.tobytes()] = _comparison(target, run)
+                cache[u.tobytes()] = comparison(target, run)
         return [cache[u.tobytes()] for u in us]
 
     u_best = np.clip(kind.to_unit(start.values), 0.0, 1.0)
@@ -217,31 +158,306 @@ def _fit(pool: _Pool, target: Target, raw: dict, start: Evaluated, stages: slice
     return Evaluated(c, kind.from_unit(u_best), best, k, "fitted")
 
 
-def _comparison(target: Target, run) -> Comparison:
-    if run.error:
-        raise RuntimeError(f"a diagnosis run stopped early: {run.error}")
-    return target.compare(run.t, run.signals)
+def _gain(after: float, before: float) -> float:
+    """1 - after / before (an objective or an nRMSE), 0 when ``before`` is 0."""
+    return 1.0 - after / before if before > 0 else 0.0
 
 
-def _entry(e: Evaluated, base: Evaluated, best_bic: float | None, twins: list[str]) -> dict:
-    kind = kind_of(e.candidate)
-    out = {"cause": e.candidate.cause}
-    if e.candidate.sleeper is not None:
-        out["sleeper"] = int(e.candidate.sleeper)
-    out.update({
-        "parameters": kind.parameters(e.values), "objective": e.cmp.objective,
-        "gain": 1.0 - e.cmp.objective / base.cmp.objective if base.cmp.objective > 0 else 0.0,
-        "evidence": {"stage": e.stage, "objective_reduction": base.cmp.objective - e.cmp.objective,
-                     "chi2": e.cmp.chi2, "n_samples": e.cmp.n, "n_parameters": e.k, "bic": e.bic(),
-                     "delta_bic_vs_nominal": base.bic() - e.bic(),
-                     "delta_bic_vs_best": None if best_bic is None else e.bic() - best_bic,
-                     "indistinguishable_from": twins},
-    })
-    return out
+def _entry(e: Evaluated, base: Evaluated, best_bic: float | None, twins: list[str]) -> CauseFit:
+    """The typed result of one evaluated candidate, with its evidence against the nominal ``base``."""
+    return CauseFit(
+        e.candidate.cause, kind_of(e.candidate).parameters(e.values), e.cmp.objective,
+        _gain(e.cmp.objective, base.cmp.objective),
+        {"stage": e.stage, "objective_reduction": base.cmp.objective - e.cmp.objective,
+         "chi2": e.cmp.chi2, "n_samples": e.cmp.n, "n_parameters": e.k, "bic": e.bic(),
+         "delta_bic_vs_nominal": base.bic() - e.bic(),
+         "delta_bic_vs_best": None if best_bic is None else e.bic() - best_bic,
+         "indistinguishable_from": twins},
+        sleeper=None if e.candidate.sleeper is None else int(e.candidate.sleeper))
+
+
+# ------------------------------------------------------------------------------------ stages
+@dataclass
+class _Inputs:
+    """What the stages of a diagnosis read: the nominal scenario, its sensors, the measurements, the candidates.
+
+    Attributes
+    ----------
+    scenario_path, measured_path
+        As given to :func:`diagnose`.
+    out_dir : Path
+    scenario : Scenario
+        The nominal scenario (:attr:`raw` is its raw dict).
+    layout : SensorLayout
+    sensors : list
+        The layout's sensors resolved on the nominal track model.
+    target : Target
+        The measured passage.
+    validations : list of (Target, Path, float)
+        Further passages: their target, file and speed [m/s].
+    cands : list of Candidate
+        The catalogue's candidates at the sensors.
+    axes : dict
+        Candidate -> (screening magnitudes with the nominal one, the nominal magnitude).
+    """
+
+    scenario_path: object
+    measured_path: object
+    out_dir: Path
+    scenario: object
+    layout: object
+    sensors: list
+    target: Target
+    validations: list
+    cands: list
+    axes: dict
+
+    @property
+    def raw0(self) -> dict:
+        """The nominal scenario's raw dict."""
+        return self.scenario.raw
+
+
+def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
+    """Read and check everything before any run.
+
+    Input: :func:`diagnose`'s paths and ``--validate`` texts. Output: the :class:`_Inputs`
+    (``out_dir`` is created). Raises :class:`UserInputError` on bad input.
+    """
+    from track.model import build_track
+
+    from orchestrator.inputs.scenario import load_scenario
+    from orchestrator.inputs.sensor_layout import layout_of
+    from orchestrator.inputs.sensor_layout import resolve
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    validations = _parse_validate(validate)
+    scenario = load_scenario(scenario_path)
+    raw0 = scenario.raw
+    layout = layout_of(scenario)
+    model = build_track(scenario.track)
+    sensors = resolve(layout, model)
+    target = Target.read(measured_path, layout)
+    sim_rate = 1.0 / scenario.simulation.output_step
+    if sim_rate < 2.0 * target.measured.rate * (1 - 1e-9):
+        raise UserInputError(f"{measured_path}: sampled at {target.measured.rate:g} Hz; the simulation's output step "
+                             f"({scenario.simulation.output_step:g} s) must be at most half the sampling interval "
+                             f"(simulation.output_step <= {0.5 / target.measured.rate:.3g} s)")
+    val_targets = [(Target.read(p, layout), p, v) for p, v in validations]
+    cands = candidates(_sensor_sleepers(sensors), len(model.layout.sleepers), SENSOR_REACH)
+    axes = {c: scalar_axis(kind_of(c), raw0, c.sleeper) for c in cands}
+    return _Inputs(scenario_path, measured_path, out_dir, scenario, layout, sensors, target, val_targets, cands, axes)
+
+
+def _baseline(pool: Pool, inp: _Inputs) -> tuple[Evaluated, Baseline]:
+    """Step 1: the nominal run.
+
+    Input: the pool, the inputs. Output: the nominal model's :class:`Evaluated` and its
+    :class:`Baseline`, which is written to ``baseline.json`` at once (so a diagnosis that
+    fails later keeps it). Aligns ``inp.target`` in time on the nominal run.
+    """
+    base_run = pool.map([inp.raw0])[0]
+    if base_run.error:
+        raise UserInputError(f"{inp.scenario_path}: the nominal run stopped early: {base_run.error}")
+    inp.target.align_to(base_run.t, base_run.signals)
+    base = Evaluated(Candidate("none"), np.zeros(0), comparison(inp.target, base_run), 0, "nominal")
+    text = json.dumps({**base.cmp.summary(), "bic": base.bic(), "where": _where(base.cmp, inp.sensors),
+                       "noise_sigma": inp.target.sigma}, indent=1, default=_json_default)
+    (inp.out_dir / "baseline.json").write_text(text)
+    return base, Baseline.from_json(json.loads(text))
+
+
+def _screen(pool: Pool, inp: _Inputs, base: Evaluated) -> dict[Candidate, dict[float, dict]]:
+    """Step 2, runs: every candidate at the magnitudes of its screening grid, in one batch.
+
+    Input: the pool, the inputs, the nominal evaluation. Output: candidate -> magnitude
+    -> simulated signals on the measured time base (the nominal magnitude's are the
+    nominal run's).
+    """
+    jobs = [(c, x) for c in inp.cands for x in inp.axes[c][0] if abs(x - inp.axes[c][1]) > 1e-12]
+    runs = pool.map([kind_of(c).apply_scalar(inp.raw0, c.sleeper, x) for c, x in jobs])
+    screened: dict[Candidate, dict[float, dict]] = {c: {inp.axes[c][1]: base.cmp.simulated} for c in inp.cands}
+    for (c, x), run in zip(jobs, runs):
+        screened[c][x] = comparison(inp.target, run).simulated
+    return screened
+
+
+def _search(inp: _Inputs, screened: dict[Candidate, dict[float, dict]]) -> dict[Candidate, Evaluated]:
+    """Step 2, no runs: each candidate's best magnitude by the dense 1-D search between its screening runs.
+
+    Input: the inputs, :func:`_screen`'s signals. Output: candidate -> its ``screened``
+    evaluation (one parameter).
+    """
+    dense = {}
+    for c in inp.cands:
+        xs = np.array(sorted(screened[c]))
+        x_best, cmp = dense_search(inp.target, kind_of(c), xs, [screened[c][x] for x in xs])
+        dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best), cmp, 1, "screened")
+    return dense
+
+
+def _confirm(pool: Pool, inp: _Inputs, dense: dict[Candidate, Evaluated]) -> dict[Candidate, Evaluated]:
+    """Step 3: the :data:`CONFIRM` best screened candidates (by BIC) re-run at their best magnitude.
+
+    Input: the pool, the inputs, :func:`_search`'s evaluations. Output: candidate -> its
+    ``confirmed`` evaluation, best screened first.
+    """
+    top = sorted(inp.cands, key=lambda c: dense[c].bic())[:CONFIRM]
+    pool.expect(len(top))
+    runs = pool.map([kind_of(c).apply(inp.raw0, c.sleeper, dense[c].values) for c in top])
+    return {c: Evaluated(c, dense[c].values, comparison(inp.target, r), 1, "confirmed") for c, r in zip(top, runs)}
+
+
+def _coarse_fits(pool: Pool, inp: _Inputs, confirmed: dict[Candidate, Evaluated]) -> dict[Candidate, Evaluated]:
+    """Step 4, first stage: every confirmed candidate fitted coarsely (:func:`_stages`, a void as a wedge).
+
+    Input: the pool, the inputs, :func:`_confirm`'s evaluations. Output: candidate -> its
+    ``fitted`` evaluation, in the same order.
+    """
+    for c in confirmed:
+        pool.expect(FIT_MAX_NFEV * (_stages(kind_of(c))[0][0] + 1))
+    return {c: _fit(pool, inp.target, inp.raw0, confirmed[c], slice(0, 1)) for c in confirmed}
+
+
+def _fine_fits(pool: Pool, inp: _Inputs, coarse: dict[Candidate, Evaluated]) -> dict[Candidate, Evaluated]:
+    """Step 4, finer stages: all parameters of the best coarse fit and of up to :data:`FIT` - 1 runners-up
+    whose chi-square is within :data:`FIT_RATIO` of its own.
+
+    Input: the pool, the inputs, :func:`_coarse_fits`' evaluations. Output: the same
+    mapping with the finely fitted candidates replaced.
+    """
+    by_fit = sorted(coarse, key=lambda c: coarse[c].bic())
+    lead = coarse[by_fit[0]].cmp.chi2
+    fitted = dict(coarse)
+    for c in [c for c in by_fit if coarse[c].cmp.chi2 <= FIT_RATIO * lead][:FIT]:
+        stages = _stages(kind_of(c))
+        if len(stages) > 1:
+            pool.expect(FINE_MAX_NFEV * sum(n + 1 for n, _ in stages[1:]))
+            fitted[c] = _fit(pool, inp.target, inp.raw0, coarse[c], slice(1, None), FINE_MAX_NFEV)
+    return fitted
+
+
+@dataclass
+class _Ranking:
+    """The candidates ranked (module doc, step 5).
+
+    Attributes
+    ----------
+    ranked : list of Evaluated
+        Every candidate's last evaluation: the fitted and confirmed ones by BIC, then the
+        screened ones by BIC.
+    best : Evaluated
+        The fitted or confirmed candidate of lowest BIC.
+    significant : bool
+        ``best`` beats the nominal model by more than :data:`DELTA_BIC`.
+    real : list of Evaluated
+        The fitted and confirmed candidates of ``ranked``.
+    twins : dict
+        Candidate of ``real`` -> labels of the others within :data:`DELTA_BIC` of it.
+    """
+
+    ranked: list
+    best: Evaluated
+    significant: bool
+    real: list
+    twins: dict
+
+
+def _rank(base: Evaluated, inp: _Inputs, dense: dict, confirmed: dict, fitted: dict) -> _Ranking:
+    """Step 5, ranking: every candidate's last evaluation by BIC, the best, and who cannot be told apart.
+
+    Input: the nominal evaluation, the inputs, the evaluations of steps 2-4. Output: the
+    :class:`_Ranking`.
+    """
+    final = {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in inp.cands}
+    ranked = sorted(final.values(), key=lambda e: (e.stage not in ("fitted", "confirmed"), e.bic()))
+    best = min((e for e in ranked if e.stage in ("fitted", "confirmed")), key=lambda e: e.bic())
+    significant = base.bic() - best.bic() > DELTA_BIC
+    real = [e for e in ranked if e.stage in ("fitted", "confirmed")]
+    twins = {e.candidate: [o.candidate.label for o in real if o is not e and abs(o.bic() - e.bic()) < DELTA_BIC]
+             for e in real}
+    return _Ranking(ranked, best, significant, real, twins)
+
+
+def _named(base: Evaluated, rk: _Ranking) -> CauseFit:
+    """Step 5, naming: the best candidate with its ambiguity set if it is significant, else ``none``.
+
+    Input: the nominal evaluation, the ranking. Output: the named cause.
+    """
+    best = rk.best
+    twins = rk.twins.get(best.candidate, [])
+    if not rk.significant:
+        return CauseFit("none", {}, base.cmp.objective, 0.0,
+                        {"best_candidate": best.candidate.label, "delta_bic_vs_nominal": base.bic() - best.bic(),
+                         "threshold": DELTA_BIC,
+                         "reason": "no candidate explains the residual better than the noise does"})
+    named = _entry(best, base, best.bic(), twins)
+    sleepers = sorted(({named.sleeper} | {e.candidate.sleeper for e in rk.real
+                                          if e.candidate.label in twins and e.candidate.cause == best.candidate.cause})
+                      - {None})
+    named.ambiguity = {"candidates": [best.candidate.label] + twins, "sleepers": sleepers}
+    return named
+
+
+def _extend(inp: _Inputs, rk: _Ranking) -> tuple[dict, Path]:
+    """Step 6: the extended model, the named cause added to the nominal scenario (a copy of it for ``none``).
+
+    Input: the inputs, the ranking. Output: the extended raw scenario and the path of
+    ``extended.yaml``, written into the output folder.
+    """
+    from orchestrator.inputs.scenario import dump_scenario, scenario_from_dict
+
+    best = rk.best
+    ext_raw = kind_of(best.candidate).apply(inp.raw0, best.candidate.sleeper, best.values) if rk.significant \
+        else copy.deepcopy(inp.raw0)
+    ext_scenario = scenario_from_dict(ext_raw, source=str(inp.scenario_path), base_dir=Path(inp.scenario_path).parent)
+    return ext_raw, dump_scenario(ext_scenario, inp.out_dir / "extended.yaml")
+
+
+def _validate(pool: Pool, inp: _Inputs, ext_raw: dict) -> list[Passage]:
+    """Step 6, further passages: nominal and extended model at each passage's speed, compared without refitting.
+
+    Input: the pool, the inputs, the extended raw scenario. Output: one :class:`Passage`
+    per ``--validate`` file.
+    """
+    validation = []
+    for vt, vpath, speed in inp.validations:
+        pool.expect(2)
+        r_before, r_after = pool.map([variant_for_speed(inp.raw0, speed), variant_for_speed(ext_raw, speed)])
+        vt.align_to(r_before.t, r_before.signals)
+        cb, ca = comparison(vt, r_before), comparison(vt, r_after)
+        validation.append(Passage(str(vpath), speed, cb.objective, ca.objective, _gain(ca.objective, cb.objective),
+                                  {k: {"nrmse_before": cb.channels[k]["nrmse"], "nrmse_after": ca.channels[k]["nrmse"]}
+                                   for k in cb.channels}))
+    return validation
+
+
+def _total_gain(before: Comparison, after: Comparison) -> Gain:
+    """Step 6, gain: of the extended model (``after``) over the nominal one (``before``), total and per channel."""
+    return Gain(_gain(after.objective, before.objective),
+                {k: _gain(after.channels[k]["nrmse"], v["nrmse"]) for k, v in before.channels.items()})
+
+
+def _settings(cands: list[Candidate]) -> dict:
+    """The thresholds of this module and the candidates' labels (``diagnosis.json`` ``settings``)."""
+    return {"delta_bic": DELTA_BIC, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH,
+            "candidates": [c.label for c in cands]}
+
+
+def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: Comparison) -> None:
+    """Write ``diagnosis.json`` and the report (``report.md`` and its plots) into the output folder.
+
+    Input: the diagnosis, the inputs, the nominal and the extended model's comparisons.
+    """
+    from orchestrator.inverse.diagnose_report import write_report
+
+    (inp.out_dir / "diagnosis.json").write_text(json.dumps(result.to_json(), indent=1, default=_json_default))
+    write_report(inp.out_dir, result, inp.target, before, after, inp.layout)
 
 
 def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 2, scheduler: str | None = None,
-             progress: bool = True) -> dict:
+             progress: bool = True) -> Diagnosis:
     """Run the diagnosis (module docstring); write diagnosis.json, extended.yaml, report.md, plots.
 
     ``baseline.json`` (the nominal model's residuals: step 1) is written as soon as it is
@@ -264,152 +480,42 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
 
     Returns
     -------
-    dict
-        The content of diagnosis.json.
+    Diagnosis
+        The answer; its :meth:`~orchestrator.inverse.diagnosis.Diagnosis.to_json` is diagnosis.json.
     """
     from tqdm import tqdm
 
-    from track.model import build_track
-
-    from orchestrator.inputs.scenario import dump_scenario, load_scenario, scenario_from_dict
-    from orchestrator.inputs.sensor_layout import layout_of
-    from orchestrator.inputs.sensor_layout import resolve
-    from orchestrator.sweeps.sweep import make_executor
+    from orchestrator.sweeps.executors import make_executor
 
     t_start = time.perf_counter()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    validations = _parse_validate(validate)
-    scenario = load_scenario(scenario_path)
-    raw0 = scenario.raw
-    layout = layout_of(scenario)
-    model = build_track(scenario.track)
-    sensors = resolve(layout, model)
-    target = Target.read(measured_path, layout)
-    sim_rate = 1.0 / scenario.simulation.output_step
-    if sim_rate < 2.0 * target.measured.rate * (1 - 1e-9):
-        raise UserInputError(f"{measured_path}: sampled at {target.measured.rate:g} Hz; the simulation's output step "
-                             f"({scenario.simulation.output_step:g} s) must be at most half the sampling interval "
-                             f"(simulation.output_step <= {0.5 / target.measured.rate:.3g} s)")
-    val_targets = [(Target.read(p, layout), p, v) for p, v in validations]
-    cands = candidates(_sensor_sleepers(sensors), len(model.layout.sleepers), SENSOR_REACH)
-    axes = {c: _scalar_axis(kind_of(c), raw0, c.sleeper) for c in cands}
-    n_screen = sum(len(xs) - 1 for xs, _ in axes.values())
-
+    inp = _read_inputs(scenario_path, measured_path, out_dir, validate)
     executor = make_executor(workers, scheduler)
-    bar = tqdm(total=1 + n_screen, desc="diagnose", unit="run", disable=not progress)
-    pool = _Pool(executor, str(Path(scenario_path).resolve().parent), scenario.sensors, bar=bar)
+    bar = tqdm(total=1 + sum(len(xs) - 1 for xs, _ in inp.axes.values()), desc="diagnose", unit="run",
+               disable=not progress)
+    pool = Pool(executor, str(Path(scenario_path).resolve().parent), inp.scenario.sensors, bar=bar)
     try:
-        # 1. baseline
-        base_run = pool.map([raw0])[0]
-        if base_run.error:
-            raise UserInputError(f"{scenario_path}: the nominal run stopped early: {base_run.error}")
-        target.align_to(base_run.t, base_run.signals)
-        base = Evaluated(Candidate("none"), np.zeros(0), _comparison(target, base_run), 0, "nominal")
-        # what the simulation gets wrong is on disk before the long part starts
-        (out_dir / "baseline.json").write_text(json.dumps(
-            {**base.cmp.summary(), "bic": base.bic(), "where": _where(base.cmp, sensors),
-             "noise_sigma": target.sigma}, indent=1, default=_json_default))
-
-        # 2. screening: all candidates x grid in one batch
-        jobs = [(c, x) for c in cands for x in axes[c][0] if abs(x - axes[c][1]) > 1e-12]
-        runs = pool.map([kind_of(c).apply_scalar(raw0, c.sleeper, x) for c, x in jobs])
-        screened: dict[Candidate, dict[float, dict]] = {c: {axes[c][1]: base.cmp.simulated} for c in cands}
-        for (c, x), run in zip(jobs, runs):
-            screened[c][x] = _comparison(target, run).simulated
-        dense = {}
-        for c in cands:
-            xs = np.array(sorted(screened[c]))
-            x_best, cmp = _dense_search(target, kind_of(c), xs, [screened[c][x] for x in xs])
-            dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best), cmp, 1, "screened")
-        order = sorted(cands, key=lambda c: dense[c].bic())
-
-        # 3. confirmation
-        top = order[:CONFIRM]
-        bar.total += len(top)
-        runs = pool.map([kind_of(c).apply(raw0, c.sleeper, dense[c].values) for c in top])
-        confirmed = {c: Evaluated(c, dense[c].values, _comparison(target, r), 1, "confirmed") for c, r in zip(top, runs)}
-
-        # 4. fit: the first (coarse) stage for every confirmed candidate, the finer ones for the
-        #    best and the runners-up close to it
-        for c in top:
-            bar.total += FIT_MAX_NFEV * (_stages(kind_of(c))[0][0] + 1)
-        coarse = {c: _fit(pool, target, raw0, confirmed[c], slice(0, 1)) for c in top}
-        by_fit = sorted(coarse, key=lambda c: coarse[c].bic())
-        lead = coarse[by_fit[0]].cmp.chi2
-        fitted = dict(coarse)
-        for c in [c for c in by_fit if coarse[c].cmp.chi2 <= FIT_RATIO * lead][:FIT]:
-            if len(_stages(kind_of(c))) > 1:
-                bar.total += FINE_MAX_NFEV * sum(n + 1 for n, _ in _stages(kind_of(c))[1:])
-                fitted[c] = _fit(pool, target, raw0, coarse[c], slice(1, None), FINE_MAX_NFEV)
-
-        # 5. ranking
-        final = {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in cands}
-        ranked = sorted(final.values(), key=lambda e: (e.stage not in ("fitted", "confirmed"), e.bic()))
-        best = min((e for e in ranked if e.stage in ("fitted", "confirmed")), key=lambda e: e.bic())
-        significant = base.bic() - best.bic() > DELTA_BIC
-        real = [e for e in ranked if e.stage in ("fitted", "confirmed")]
-        twins = {e.candidate: [o.candidate.label for o in real if o is not e and abs(o.bic() - e.bic()) < DELTA_BIC]
-                 for e in real}
-        causes = [_entry(e, base, best.bic(), twins.get(e.candidate, [])) for e in ranked]
-        named_eval = best if significant else None
-
-        # 6. extended model, gain, validation
-        ext_raw = kind_of(best.candidate).apply(raw0, best.candidate.sleeper, best.values) if significant \
-            else copy.deepcopy(raw0)
-        ext_scenario = scenario_from_dict(ext_raw, source=str(scenario_path), base_dir=Path(scenario_path).parent)
-        ext_path = dump_scenario(ext_scenario, out_dir / "extended.yaml")
-        after = named_eval.cmp if significant else base.cmp
-        validation = []
-        for vt, vpath, speed in val_targets:
-            bar.total += 2
-            r_before, r_after = pool.map([variant_for_speed(raw0, speed), variant_for_speed(ext_raw, speed)])
-            vt.align_to(r_before.t, r_before.signals)
-            cb, ca = _comparison(vt, r_before), _comparison(vt, r_after)
-            validation.append({"file": str(vpath), "speed": speed, "objective_before": cb.objective,
-                               "objective_after": ca.objective,
-                               "gain": 1.0 - ca.objective / cb.objective if cb.objective > 0 else 0.0,
-                               "channels": {k: {"nrmse_before": cb.channels[k]["nrmse"],
-                                                "nrmse_after": ca.channels[k]["nrmse"]} for k in cb.channels}})
+        base, baseline = _baseline(pool, inp)
+        dense = _search(inp, _screen(pool, inp, base))
+        confirmed = _confirm(pool, inp, dense)
+        fitted = _fine_fits(pool, inp, _coarse_fits(pool, inp, confirmed))
+        ranking = _rank(base, inp, dense, confirmed, fitted)
+        ext_raw, ext_path = _extend(inp, ranking)
+        validation = _validate(pool, inp, ext_raw)
     finally:
         bar.close()
         executor.shutdown(wait=True, cancel_futures=True)
 
-    if significant:
-        named = _entry(named_eval, base, best.bic(), twins.get(best.candidate, []))
-        sleepers = sorted(({named.get("sleeper")} | {e.candidate.sleeper for e in real
-                                                     if e.candidate.label in twins.get(best.candidate, [])
-                                                     and e.candidate.cause == best.candidate.cause}) - {None})
-        named["ambiguity"] = {"candidates": [best.candidate.label] + twins.get(best.candidate, []),
-                              "sleepers": sleepers}
-    else:
-        named = {"cause": "none", "parameters": {}, "objective": base.cmp.objective, "gain": 0.0,
-                 "evidence": {"best_candidate": best.candidate.label,
-                              "delta_bic_vs_nominal": base.bic() - best.bic(),
-                              "threshold": DELTA_BIC,
-                              "reason": "no candidate explains the residual better than the noise does"}}
-    result = {
-        "scenario": str(scenario_path), "measured": str(measured_path),
-        "baseline": json.loads((out_dir / "baseline.json").read_text()),
-        "causes": causes,
-        "named_cause": named,
-        "extended_scenario": ext_path.name,
-        "gain": {"total": 1.0 - after.objective / base.cmp.objective if base.cmp.objective > 0 else 0.0,
-                 "channels": {k: 1.0 - after.channels[k]["nrmse"] / v["nrmse"] if v["nrmse"] > 0 else 0.0
-                              for k, v in base.cmp.channels.items()}},
-        "validation": validation,
-        "runs": pool.runs, "wall_seconds": time.perf_counter() - t_start,
-        "settings": {"delta_bic": DELTA_BIC, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH,
-                     "candidates": [c.label for c in cands]},
-    }
-    (out_dir / "diagnosis.json").write_text(json.dumps(result, indent=1, default=_json_default))
-    from orchestrator.inverse.diagnose_report import write_report
-
-    write_report(out_dir, result, target, base.cmp, after, layout)
+    after = ranking.best.cmp if ranking.significant else base.cmp
+    causes = [_entry(e, base, ranking.best.bic(), ranking.twins.get(e.candidate, [])) for e in ranking.ranked]
+    result = Diagnosis(str(scenario_path), str(measured_path), baseline, causes, _named(base, ranking),
+                       ext_path.name, _total_gain(base.cmp, after), validation, pool.runs,
+                       time.perf_counter() - t_start, _settings(inp.cands))
+    _write_outputs(result, inp, base.cmp, after)
     return result
 
 
 def _json_default(o):
+    """NumPy scalars and arrays as JSON numbers and lists (``json.dumps(default=...)``)."""
     if isinstance(o, (np.floating, np.integer)):
         return o.item()
     if isinstance(o, np.ndarray):
@@ -417,4 +523,4 @@ def _json_default(o):
     raise TypeError(type(o).__name__)
 
 
-__all__ = ["diagnose", "DELTA_BIC"]
+__all__ = ["diagnose", "DELTA_BIC", "Diagnosis", "CauseFit"]

@@ -1,0 +1,119 @@
+"""The runs and the 1-D screening search of a diagnosis (:mod:`orchestrator.inverse.diagnose`, steps 1-3).
+
+:class:`Pool` runs scenario variants on an executor and counts them; :class:`Evaluated`
+is one candidate at one parameter vector with its comparison and BIC; a candidate is
+screened at the magnitudes of :func:`scalar_axis` and its best magnitude found by
+:func:`dense_search`, which interpolates the screening runs' *signals* (monotone cubic
+in the magnitude, log scale for stiffness factors) instead of running more.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from orchestrator.inverse.causes import Candidate
+from orchestrator.inverse.objective import Comparison, Target
+
+DENSE = 121          # points of the 1-D search between screening runs
+
+
+@dataclass
+class Evaluated:
+    """One candidate at one parameter vector, with its comparison.
+
+    Attributes
+    ----------
+    candidate : Candidate
+    values : ndarray
+        The cause's parameter vector (units of its scenario keys).
+    cmp : Comparison
+        The run (or the interpolated signals) against the measurement.
+    k : int
+        Parameters fitted to get there (0 for the nominal model).
+    stage : str
+        ``nominal``, ``screened``, ``confirmed`` or ``fitted``.
+    """
+
+    candidate: Candidate
+    values: np.ndarray
+    cmp: Comparison
+    k: int
+    stage: str
+
+    def bic(self) -> float:
+        """Bayesian information criterion chi2 + k ln N."""
+        return self.cmp.chi2 + self.k * math.log(self.cmp.n)
+
+
+@dataclass
+class Pool:
+    """Runs of scenario variants on an executor (local processes or Dask)."""
+
+    executor: object
+    base_dir: str
+    layout_path: str | None
+    runs: int = 0
+    wall: float = 0.0
+    bar: object = None
+
+    def expect(self, n: int) -> None:
+        """Announce ``n`` more runs to the progress bar."""
+        if self.bar is not None:
+            self.bar.total += n
+
+    def map(self, raws: list[dict]) -> list:
+        """The runs of ``raws`` (raw scenario dicts), in their order."""
+        from orchestrator.cosim.sensing import sensors_job
+
+        t0 = time.perf_counter()
+        futures = [self.executor.submit(sensors_job, raw, self.base_dir, self.layout_path) for raw in raws]
+        out = []
+        for f in futures:
+            run = f.result()
+            out.append(run)
+            if self.bar is not None:
+                self.bar.update(1)
+        self.runs += len(raws)
+        self.wall += time.perf_counter() - t0
+        return out
+
+
+def scalar_axis(kind, raw: dict, sleeper) -> tuple[np.ndarray, float]:
+    """Screening magnitudes with the nominal one, sorted, and the nominal magnitude."""
+    nominal = float(np.max(kind.nominal(raw, sleeper))) if kind.name == "ballast_void" else \
+        float(kind.nominal(raw, sleeper)[0])
+    grid = sorted(set([nominal] + [g for g in kind.grid if abs(g - nominal) > 1e-12]))
+    return np.array(grid, float), nominal
+
+
+def dense_search(target: Target, kind, xs: np.ndarray, signals: list[dict]) -> tuple[float, Comparison]:
+    """Best magnitude of a 1-D family of runs by interpolating their signals (module docstring)."""
+    from scipy.interpolate import PchipInterpolator
+
+    u = np.log(xs) if kind.log else xs
+    ids = list(signals[0])
+    Y = np.stack([np.concatenate([sig[k] for k in ids]) for sig in signals])   # (nx, total)
+    sizes = np.cumsum([0] + [signals[0][k].size for k in ids])
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):   # flat stretches of a signal
+        interp = PchipInterpolator(u, Y, axis=0)
+    best = None
+    for ud in np.linspace(u[0], u[-1], DENSE):
+        row = interp(ud)
+        on = {k: row[sizes[i]:sizes[i + 1]] for i, k in enumerate(ids)}
+        cmp = target.score(on)
+        if best is None or cmp.chi2 < best[1].chi2:
+            best = (float(np.exp(ud) if kind.log else ud), cmp)
+    return best
+
+
+def comparison(target: Target, run) -> Comparison:
+    """The comparison of a finished run with ``target``; a run that stopped early is an error."""
+    if run.error:
+        raise RuntimeError(f"a diagnosis run stopped early: {run.error}")
+    return target.compare(run.t, run.signals)
+
+
+__all__ = ["Pool", "Evaluated", "DENSE", "scalar_axis", "dense_search", "comparison"]
