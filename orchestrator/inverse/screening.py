@@ -82,9 +82,12 @@ class Pool:
 
 
 def scalar_axis(kind, raw: dict, sleeper) -> tuple[np.ndarray, float]:
-    """Screening magnitudes with the nominal one, sorted, and the nominal magnitude."""
-    nominal = float(np.max(kind.nominal(raw, sleeper))) if kind.name == "ballast_void" else \
-        float(kind.nominal(raw, sleeper)[0])
+    """Screening magnitudes with the nominal one, sorted, and the nominal magnitude.
+
+    The nominal magnitude of a vector cause (the 6 void gaps) is its largest entry; of a
+    scalar cause, its value.
+    """
+    nominal = float(np.max(kind.nominal(raw, sleeper)))
     grid = sorted(set([nominal] + [g for g in kind.grid if abs(g - nominal) > 1e-12]))
     return np.array(grid, float), nominal
 
