@@ -82,10 +82,10 @@ class InProcessTrack:
     def __init__(self, scenario, n_wheels: int, h: float, extrapolate: bool, record_every: int,
                  extrapolate_force: bool):
         from track.cosim import TrackCosim
-        from track.model import build_track
+        from orchestrator.inputs.track_model import track_model
 
         t_start = time.perf_counter()
-        self.model = build_track(scenario.track)
+        self.model = track_model(scenario.track)
         self.wall_build = time.perf_counter() - t_start  # [s] (short when the bodies are cached)
         self.engine = TrackCosim(scenario.track, n_wheels, 0.5 * scenario.vehicle.axle_load, h,
                                  speed=scenario.vehicle.speed, extrapolate=extrapolate,

@@ -29,9 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from track.model import TrackModel, build_track
+from track.model import TrackModel
 from track.sensors import GAUGE_LENGTH, RECONSTRUCTION_HIGHPASS, SENSOR_TYPES, Sensor
 
+from orchestrator.inputs.track_model import track_model
 from orchestrator.inputs.errors import UserInputError, did_you_mean as _hint
 from orchestrator.inputs.yaml_io import read_yaml
 
@@ -250,7 +251,7 @@ def scenario_sensors(scenario, model=None) -> list:
     """
     layout = layout_of(scenario)
     try:
-        return resolve(layout, build_track(scenario.track) if model is None else model)
+        return resolve(layout, track_model(scenario.track) if model is None else model)
     except UserInputError as exc:
         if scenario.sensors is not None:
             raise

@@ -224,7 +224,7 @@ def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
     Input: :func:`diagnose`'s paths and ``--validate`` texts. Output: the :class:`_Inputs`
     (``out_dir`` is created). Raises :class:`UserInputError` on bad input.
     """
-    from track.model import build_track
+    from orchestrator.inputs.track_model import track_model
 
     from orchestrator.inputs.scenario import load_scenario
     from orchestrator.inputs.sensor_layout import layout_of
@@ -236,7 +236,7 @@ def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
     scenario = load_scenario(scenario_path)
     raw0 = scenario.raw
     layout = layout_of(scenario)
-    model = build_track(scenario.track)
+    model = track_model(scenario.track)
     sensors = resolve(layout, model)
     target = Target.read(measured_path, layout)
     sim_rate = 1.0 / scenario.simulation.output_step

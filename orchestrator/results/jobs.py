@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from track.frf import receptance
-from track.model import build_track
+from orchestrator.inputs.track_model import track_model
 from track.post import body_response
 from track.statics import static_equilibrium
 from track.timegrid import step_count
@@ -55,7 +55,7 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     res = _cosimulate(scenario, out_dir, progress, backend)
-    model = build_track(scenario.track)  # the same model (cached bodies) for post-processing
+    model = track_model(scenario.track)  # the same model (cached bodies) for post-processing
     summary = _run_summary(scenario, backend, model, res)
     # ---- signals first: nothing computed is lost if a later step fails
     _write_signals(out_dir, res, _virtual_sensors(scenario, model, res))
@@ -207,7 +207,7 @@ def frf_job(scenario, out_dir: Path, at: str | None, fmax: float) -> dict:
     """Receptance at ``at`` ("body:x", default the crossing rail at the transition) up to ``fmax`` [Hz]."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    model = build_track(scenario.track)
+    model = track_model(scenario.track)
     side, x_ref, _ = reference_point(model)
     if at is None:
         body, x = model.layout.running_body(side, x_ref), x_ref

@@ -191,14 +191,14 @@ def seed000_table(out_dir: Path) -> list[Path]:
 
     from orchestrator.cosim.master import run_cosim
     from orchestrator.inputs.scenario import bundled_scenario, load_scenario
-    from track.model import build_track
+    from orchestrator.inputs.track_model import track_model
 
     sc = load_scenario(bundled_scenario(SEED000))
     rows = []
     for label, model_name, seed_dofs, seed_cpu in (("beam", "beam", 798, 30),
                                                    ("3D solid crossing rail", "solid", 904, 40)):
         s = replace(sc, track=replace(sc.track, model=model_name))
-        model = build_track(s.track)
+        model = track_model(s.track)
         one_time = model.stats.t_solid_mesh + model.stats.t_solid_reduction
         t0 = time.process_time()
         res = run_cosim(s, backend="inprocess", record_states=False)
@@ -233,7 +233,7 @@ def seed000_receptance(out_dir: Path, fmax: float = FRF_FMAX, n_freqs: int = 400
     from orchestrator.results.plots import plot_frf, save
     from orchestrator.inputs.scenario import bundled_scenario, load_scenario
     from track.frf import receptance
-    from track.model import build_track
+    from orchestrator.inputs.track_model import track_model
     from track.statics import static_equilibrium
 
     sc = load_scenario(bundled_scenario(SEED000))
@@ -241,7 +241,7 @@ def seed000_receptance(out_dir: Path, fmax: float = FRF_FMAX, n_freqs: int = 400
     H = {}
     for label, model_name in (("beam", "beam"), ("3D solid crossing rail", "solid")):
         tp = replace(sc.track, model=model_name, reduction=replace(sc.track.reduction, f_cut=FRF_F_CUT))
-        model = build_track(tp)
+        model = track_model(tp)
         lay = model.layout
         H[label] = receptance(model, model.rail_point(lay.crossing_side, lay.x_transition), f,
                               static_equilibrium(model, []).q)
@@ -266,7 +266,8 @@ SEED000_VOID = (0.0, 0.4e-3, 0.9e-3, 0.9e-3, 0.4e-3, 0.0)   # m: DESIGN.md §4.2
 def seed000_pressure(out_dir: Path, workers: int = 2, scheduler: str | None = None,
                      progress: bool = True) -> list[Path]:
     """Seed 000's measured vs nominal vs calibrated ballast pressure (module docstring)."""
-    from track.model import build_track, reference_point
+    from track.model import reference_point
+    from orchestrator.inputs.track_model import track_model
     from orchestrator.inverse.diagnose import diagnose
     from orchestrator.inverse.objective import Target
     from orchestrator.inputs.scenario import bundled_scenario, load_scenario
@@ -276,7 +277,7 @@ def seed000_pressure(out_dir: Path, workers: int = 2, scheduler: str | None = No
     out_dir = Path(out_dir)
     path = bundled_scenario(SEED000_MEASURED)
     sc = load_scenario(path)
-    model = build_track(sc.track)
+    model = track_model(sc.track)
     k_t = reference_point(model)[2]
     work = out_dir / "seed000_pressure"
     work.mkdir(parents=True, exist_ok=True)

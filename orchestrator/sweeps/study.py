@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from track.layout import build_layout
-from track.model import build_track
+from orchestrator.inputs.track_model import track_model
 
 from orchestrator.results.analysis import analyse
 from orchestrator.cosim.master import run_cosim
@@ -52,7 +52,7 @@ def run_case(scenario, run_dir: Path) -> dict[str, float]:
     res = run_cosim(scenario, backend="inprocess", record_states=True)
     if res.error:
         raise RuntimeError(res.error)
-    model = build_track(scenario.track)
+    model = track_model(scenario.track)
     an = analyse(model, 0.5 * scenario.vehicle.axle_load, res)
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -286,7 +286,7 @@ def _pad_seat_points(seat, kind: str, two_bushings: bool, solid_offset: float | 
     return [(seat.y, 1.0, 0)]
 
 
-def _split_crossing(lay: Layout, params: TrackParams):
+def _split_crossing(lay: Layout, params: TrackParams, cache_dir=None):
     """The layout with the crossing block split into beam / solid / beam parts, and the solid.
 
     Returns ``(layout, solid)``: the solid part keeps the name ``crossing`` (it carries
@@ -334,7 +334,7 @@ def _split_crossing(lay: Layout, params: TrackParams):
     red = params.reduction
     sp_ = solid_params(lay, blk.profile, blk.x_start, x_a, x_b, [st.x for st in inner],
                        red.solid_mesh_size, red.f_cut, red.element_length)
-    return replace(lay, rails=tuple(rails), joints=tuple(joints), running=running), solid_crossing(sp_)
+    return replace(lay, rails=tuple(rails), joints=tuple(joints), running=running), solid_crossing(sp_, cache_dir)
 
 
 def reference_point(model: TrackModel) -> tuple[str, float, int]:
@@ -351,7 +351,7 @@ def reference_point(model: TrackModel) -> tuple[str, float, int]:
     return "left", lay.sleepers[k].x, k
 
 
-def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel:
+def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=None) -> TrackModel:
     """Build the reduced track model.
 
     Parameters
@@ -359,6 +359,9 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
     params : TrackParams
     layout : Layout, optional
         A precomputed layout of ``params.layout``.
+    cache_dir : path-like, optional
+        Folder of the solid crossing rail's on-disk cache (``track.model: solid``; see
+        :func:`track.solid.crossing.cache_dir_from_env`); None keeps it in memory only.
 
     Returns
     -------
@@ -371,7 +374,7 @@ def build_track(params: TrackParams, layout: Layout | None = None) -> TrackModel
     lay = layout if layout is not None else build_layout(params.layout)
     solid = None
     if params.model == "solid":
-        lay, solid = _split_crossing(lay, params)
+        lay, solid = _split_crossing(lay, params, cache_dir)
         if solid.from_cache:
             stats.cache_hits += 1
         else:

@@ -38,16 +38,19 @@ displacements at any surface point (strain gauges).
 Cost and cache
 --------------
 Meshing, assembly and reduction take ~10 s (1:12, 0.6 m spacing, h = 0.06 m).
-The reduced body is kept in-process and on disk (``$TURNOUT_CACHE``, default
-``~/.cache/turnout``; ``TURNOUT_CACHE=off`` disables the disk cache), keyed by
-every parameter that changes it (geometry, mesh size, cut-off), so parameter
-studies on bushings and ballast build it once.
+The reduced body is kept in-process and, when the caller passes a folder, on
+disk, keyed by every parameter that changes it (geometry, mesh size, cut-off), so
+parameter studies on bushings and ballast build it once. This module never chooses
+the folder: the edges do (the orchestrator and the track FMU pass
+:func:`cache_dir_from_env` of their environment: ``$TURNOUT_CACHE``, default
+``~/.cache/turnout``; ``TURNOUT_CACHE=off`` disables the disk cache).
 """
 from __future__ import annotations
 
 import hashlib
 import os
 import time
+from typing import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -312,14 +315,19 @@ def _key(p: SolidRailParams) -> str:
     return hashlib.sha1(repr(fields).encode()).hexdigest()
 
 
-def cache_dir() -> Path | None:
-    """Folder of the on-disk cache (``$TURNOUT_CACHE`` or ``~/.cache/turnout``); None if ``off``."""
-    env = os.environ.get("TURNOUT_CACHE")
+def cache_dir_from_env(environ: Mapping[str, str]) -> Path | None:
+    """The on-disk cache folder an environment asks for; None for no disk cache.
+
+    ``TURNOUT_CACHE`` (a folder, or ``off``), else ``$XDG_CACHE_HOME/turnout``, else
+    ``~/.cache/turnout``. A pure function of ``environ``: the caller passes its
+    environment and hands the result to :func:`solid_crossing` / ``build_track``.
+    """
+    env = environ.get("TURNOUT_CACHE")
     if env is not None and env.strip().lower() in ("off", "0", "none", ""):
         return None
     if env:
         return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME")
+    base = environ.get("XDG_CACHE_HOME")
     return (Path(base) if base else Path.home() / ".cache") / "turnout"
 
 
@@ -354,12 +362,14 @@ def clear_solid_cache() -> None:
     _CACHE.clear()
 
 
-def solid_crossing(p: SolidRailParams) -> SolidCrossing:
+def solid_crossing(p: SolidRailParams, cache_dir: Path | None = None) -> SolidCrossing:
     """The reduced solid body of ``p``: from memory, from disk, or built (and cached).
 
     Parameters
     ----------
     p : SolidRailParams
+    cache_dir : Path, optional
+        Folder of the on-disk cache (:func:`cache_dir_from_env`); None: in memory only.
 
     Returns
     -------
@@ -369,8 +379,7 @@ def solid_crossing(p: SolidRailParams) -> SolidCrossing:
     sc = _CACHE.get(key)
     if sc is not None:
         return replace(sc, from_cache="memory")
-    folder = cache_dir()
-    path = None if folder is None else folder / f"solid-{key}.npz"
+    path = None if cache_dir is None else Path(cache_dir) / f"solid-{key}.npz"
     if path is not None and path.exists():
         sc = _load(p, path)
     if sc is None:
@@ -434,4 +443,4 @@ def _moment_row(points: np.ndarray, tets: np.ndarray, p: SolidRailParams, s: flo
 
 
 __all__ = ["SolidCrossing", "solid_crossing", "build_solid_crossing", "solid_params", "solid_extent",
-           "trimmed_section_properties", "cache_dir", "clear_solid_cache", "SOLID_SPANS"]
+           "trimmed_section_properties", "cache_dir_from_env", "clear_solid_cache", "SOLID_SPANS"]
