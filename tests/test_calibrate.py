@@ -293,6 +293,23 @@ def test_resume_does_not_redo_finished_runs(tmp_path):
     assert np.array_equal(again.u, res.u)
 
 
+def test_result_round_trips_through_its_json(tmp_path):
+    """calibration.json is CalibrationResult.to_json, and from_json gives back the same result."""
+    out = tmp_path / "out"
+    res = cal.calibrate(MEASUREMENT, None, out, params=BOWL_PARAMS + ",track.rail_pad.damping=1e4:4e4", n1=12,
+                        n2=6, seed=3, workers=1, progress=False, run_fn=bowl_run, polish=0)
+    text = (out / "calibration.json").read_text()
+    assert res.to_json() == text
+    back = cal.CalibrationResult.from_json(text, out)
+    assert back.to_json() == text  # the file format survives the round trip to the letter
+    assert back.params == res.params and back.values == res.values and back.summary == res.summary
+    assert back.scenario_file == res.scenario_file == out / "calibrated.yaml" and back.stages == {}
+    # u is stored for the surrogate optimum and the polish (exact); a best run's is its values mapped back, which
+    # round-off alone moves (1e-12 in the unit cube)
+    assert np.allclose(back.u, res.u, rtol=0, atol=1e-12), (back.u, res.u)
+    assert cal.CalibrationResult.read(out).to_json() == text
+
+
 # --------------------------------------------------------------------------------------
 # Command line
 # --------------------------------------------------------------------------------------
