@@ -5,7 +5,7 @@ are resumable and run on local processes or a Dask cluster):
 
 0. **Parameters** (:func:`~orchestrator.inverse.calibration_params.parse_params`) are mapped to the unit cube, ``u in [0, 1]^k``;
    stiffness scales on a log scale. Bounds and scales come from the cause catalogue
-   (:data:`orchestrator.inverse.causes.CATALOGUE`) unless given. The objective is J of
+   (:data:`orchestrator.inputs.causes.CATALOGUE`) unless given. The objective is J of
    :mod:`orchestrator.inverse.objective` (weighted sum over sensor groups of the channels'
    nRMSE), with the time alignment fixed once from the nominal scenario.
 1. **Latin hypercube** of ``n1`` runs over the whole cube (:class:`scipy.stats.qmc.LatinHypercube`).
@@ -104,6 +104,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.inverse.calibration_params import (DEFAULT_PARAMS, Parameter, apply_values, nominal_values,
                                                      parse_params, values_at)
 from orchestrator.inverse.calibration_report import plots, report, summarise
@@ -177,7 +178,7 @@ class CalibrationResult:
         ``objective_after``, ``gain``, ``channels`` (nRMSE per channel), ``wall_time_s`` [s]
         and ``plots`` (:func:`orchestrator.inverse.calibration_report.summarise`).
         """
-        return json.dumps(self.summary, indent=1, default=_json_default)
+        return json.dumps(self.summary, indent=1, default=numpy_default)
 
     @classmethod
     def from_json(cls, text: str, out_dir: str | os.PathLike) -> CalibrationResult:
@@ -201,15 +202,6 @@ class CalibrationResult:
     def read(cls, out_dir: str | os.PathLike) -> CalibrationResult:
         """The result stored in ``out_dir/calibration.json``."""
         return cls.from_json((Path(out_dir) / CALIBRATION_FILE).read_text(), out_dir)
-
-
-def _json_default(o):
-    """JSON of NumPy arrays and scalars (lists and Python numbers)."""
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    raise TypeError(type(o).__name__)
 
 
 def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, out_dir: str | os.PathLike, *,

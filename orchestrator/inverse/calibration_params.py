@@ -2,11 +2,11 @@
 
 Part of :mod:`orchestrator.inverse.calibrate` (its module docstring gives the ``--params``
 syntax). Every named item is a question to the cause registry
-(:data:`orchestrator.inverse.causes.CATALOGUE`): its ``aliases`` name the items (``h1``,
+(:data:`orchestrator.inputs.causes.CATALOGUE`): its ``aliases`` name the items (``h1``,
 ``gaps``, ``pad``, ...), its bounds and log scale are the defaults, its sites say where a
 value goes in the scenario. A plain ``key.path=LO:HI`` item is a one-entry
-:class:`~orchestrator.inverse.causes.CauseKind` named by its key, whose site is a
-:class:`~orchestrator.inverse.causes.KeySite` at that key; so :func:`apply_values` and
+:class:`~orchestrator.inputs.causes.CauseKind` named by its key, whose site is a
+:class:`~orchestrator.inputs.causes.KeySite` at that key; so :func:`apply_values` and
 :func:`nominal_values` treat every parameter alike.
 """
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 
 from orchestrator.inputs import keypath
 from orchestrator.inputs.errors import ScenarioError, UserInputError
-from orchestrator.inverse.causes import CATALOGUE, CauseKind
+from orchestrator.inputs.causes import CATALOGUE, CauseKind
 
 __all__ = ["Parameter", "DEFAULT_PARAMS", "parse_params", "apply_values", "nominal_values", "variation",
            "values_at"]

@@ -7,7 +7,7 @@ The procedure (DESIGN.md §4.5; every threshold is a named constant below):
    per-channel nRMSE, the objective J, the noise level of each channel estimated from
    the measurement itself, chi-square). *Where* it is wrong: per group, per sleeper
    carrying sensors, and the time window holding 80 % of each channel's residual.
-2. **Screening.** Every candidate of the catalogue (:mod:`orchestrator.inverse.causes`: each
+2. **Screening.** Every candidate of the catalogue (:mod:`orchestrator.inputs.causes`: each
    cause at each sleeper carrying sensors, and the global ones) is run at the few
    magnitudes of its screening grid. Between grid points the *signals* are
    interpolated (monotone cubic in the magnitude, log scale for stiffness factors),
@@ -57,9 +57,10 @@ from pathlib import Path
 
 import numpy as np
 
+from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.cosim.sensing import variant_for_speed
 from orchestrator.inputs.errors import UserInputError
-from orchestrator.inverse.causes import Candidate, candidates, kind_of
+from orchestrator.inputs.causes import Candidate, candidates, kind_of
 from orchestrator.inverse.diagnosis import Baseline, CauseFit, Diagnosis, Gain, Passage
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, comparison, dense_search, scalar_axis
@@ -263,7 +264,7 @@ def _baseline(pool: Pool, inp: _Inputs) -> tuple[Evaluated, Baseline]:
     inp.target.align_to(base_run.t, base_run.signals)
     base = Evaluated(Candidate("none"), np.zeros(0), comparison(inp.target, base_run), 0, "nominal")
     text = json.dumps({**base.cmp.summary(), "bic": base.bic(), "where": _where(base.cmp, inp.sensors),
-                       "noise_sigma": inp.target.sigma}, indent=1, default=_json_default)
+                       "noise_sigma": inp.target.sigma}, indent=1, default=numpy_default)
     (inp.out_dir / "baseline.json").write_text(text)
     return base, Baseline.from_json(json.loads(text))
 
@@ -452,7 +453,7 @@ def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: C
     """
     from orchestrator.inverse.diagnose_report import write_report
 
-    (inp.out_dir / "diagnosis.json").write_text(json.dumps(result.to_json(), indent=1, default=_json_default))
+    (inp.out_dir / "diagnosis.json").write_text(json.dumps(result.to_json(), indent=1, default=numpy_default))
     write_report(inp.out_dir, result, inp.target, before, after, inp.layout)
 
 
@@ -512,15 +513,6 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
                        time.perf_counter() - t_start, _settings(inp.cands))
     _write_outputs(result, inp, base.cmp, after)
     return result
-
-
-def _json_default(o):
-    """NumPy scalars and arrays as JSON numbers and lists (``json.dumps(default=...)``)."""
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o).__name__)
 
 
 __all__ = ["diagnose", "DELTA_BIC", "Diagnosis", "CauseFit"]

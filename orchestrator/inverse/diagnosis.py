@@ -72,9 +72,9 @@ class CauseFit:
     Attributes
     ----------
     cause : str
-        A cause of :data:`orchestrator.inverse.causes.CATALOGUE`, or ``"none"``.
+        A cause of :data:`orchestrator.inputs.causes.CATALOGUE`, or ``"none"``.
     parameters : dict
-        JSON-able parameters (:meth:`orchestrator.inverse.causes.CauseKind.parameters`:
+        JSON-able parameters (:meth:`orchestrator.inputs.causes.CauseKind.parameters`:
         gaps in m, scales as factors, the angle in rad); empty for ``none``.
     objective : float
         J with this cause [-].

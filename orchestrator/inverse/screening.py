@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orchestrator.inverse.causes import Candidate
+from orchestrator.inputs.causes import Candidate
 from orchestrator.inverse.objective import Comparison, Target
 
 DENSE = 121          # points of the 1-D search between screening runs

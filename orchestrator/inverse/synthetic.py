@@ -1,7 +1,7 @@
 """Synthetic measurements: a scenario with an effect, sampled as a field campaign would be.
 
 :func:`synthesize` runs the scenario with the effect (a cause of
-:mod:`orchestrator.inverse.causes` at given parameters) and turns its virtual sensors into a
+:mod:`orchestrator.inputs.causes` at given parameters) and turns its virtual sensors into a
 measurement file:
 
 1. the acquisition samples at ``rate`` [Hz] (default: the layout's, at most half the
@@ -31,7 +31,7 @@ from scipy.interpolate import CubicSpline
 
 from track.sensors import displacement_from_acceleration
 
-from orchestrator.inverse.causes import CATALOGUE, DRAWS
+from orchestrator.inputs.causes import CATALOGUE, DRAWS
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.measured import write_measured
 from orchestrator.cosim.sensing import simulate_sensors

@@ -54,6 +54,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.cosim import passage
 from orchestrator.cosim.ssp.ssd import TRACK, VEHICLE, Component, Connection, step_ns
 from orchestrator.cosim.ssp.writer import model_variables, write_ssp
@@ -107,17 +108,21 @@ RUN_PARAMETERS = ("speed", "static_wheel_load", "extrapolate", "extrapolate_forc
 def track_parameters(scenario) -> dict:
     """Parameter values of the track component (before filtering against the FMU).
 
-    The run parameters (:data:`RUN_PARAMETERS`) and the scenario-parameter bindings
-    (``h1``, ``h2``, ``impact_angle``: bound only where the track FMU declares them,
-    a plain-track FMU may have no impact angle). The one place that maps scenario keys
-    onto track FMU parameters.
+    The run parameters (:data:`RUN_PARAMETERS`) and the bindings of the causes the
+    registry maps onto global track-FMU parameters (:data:`orchestrator.inputs.causes.CATALOGUE`,
+    ``fmu_parameters["global"]``: ``h1``, ``h2``, ``impact_angle``), with the scenario's
+    values; they are bound only where the track FMU declares them (a plain-track FMU
+    may have no impact angle).
     """
-    t, v = scenario.track, scenario.vehicle
-    return {"speed": float(v.speed), "static_wheel_load": 0.5 * float(v.axle_load),
-            "extrapolate": bool(scenario.simulation.extrapolation),
-            "extrapolate_force": bool(scenario.simulation.extrapolation),
-            "h1": float(t.ballast.stiffness_scale), "h2": float(t.rail_pad.stiffness_scale),
-            "impact_angle": float(t.impact_angle)}
+    v = scenario.vehicle
+    values = {"speed": float(v.speed), "static_wheel_load": 0.5 * float(v.axle_load),
+              "extrapolate": bool(scenario.simulation.extrapolation),
+              "extrapolate_force": bool(scenario.simulation.extrapolation)}
+    for kind in CATALOGUE.values():
+        for name, value in zip(kind.fmu_parameters.get("global", ()), kind.nominal(scenario.raw, None)
+                               if "global" in kind.fmu_parameters else ()):
+            values[name] = float(value)
+    return values
 
 
 def vehicle_parameters(scenario) -> dict:
