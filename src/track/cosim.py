@@ -26,6 +26,7 @@ import numpy as np
 
 from .contact import HERTZ_CONSTANT, CrossingGeometry, DippedJoint, Flat, hertz_deflection
 from .dynamics import ALPHA_DEFAULT, Counters, PointLoad, TrackIntegrator
+from .kernel import CompiledContacts, kernel_enabled
 from .model import TrackModel, build_track
 from .params import TrackParams
 from .statics import static_equilibrium
@@ -88,13 +89,20 @@ class TrackCosim:
         Record the state every this many steps (0: never).
     model : TrackModel, optional
         A prebuilt model of ``params``.
+    kernel : bool, optional
+        Step with the compiled kernel (:mod:`track.kernel`) or with the numpy reference
+        path of :meth:`TrackIntegrator.step_contacts`; default: the environment variable
+        ``TURNOUT_TRACK_KERNEL`` (``numpy`` selects the reference), else compiled.
     """
 
     def __init__(self, params: TrackParams, n_wheels: int, static_wheel_load, h: float, speed: float = 0.0,
                  extrapolate: bool = False, auto_offset: bool = True, record_every: int = 0,
                  extrapolate_force: bool = False,
-                 model: TrackModel | None = None, alpha: float = ALPHA_DEFAULT, c_h: float = HERTZ_CONSTANT):
+                 model: TrackModel | None = None, alpha: float = ALPHA_DEFAULT, c_h: float = HERTZ_CONSTANT,
+                 kernel: bool | None = None):
         self.params = params
+        self.kernel = kernel_enabled(kernel)
+        self._compiled: CompiledContacts | None = None
         self.model = model if model is not None else build_track(params)
         self.n = int(n_wheels)
         self.sides = wheel_sides(self.n)
@@ -174,6 +182,7 @@ class TrackCosim:
         self.offset = self.z_static - np.asarray(z, float) if self.auto_offset else np.zeros(self.n)
         t_start = time.perf_counter()
         self.integ = TrackIntegrator(self.model, self.h, st.q, loads0=loads, alpha=self.alpha)
+        self._attach_kernel()
         self.wall_factor = time.perf_counter() - t_start
         self.integ.t0 = t0
         self.rail_w = w
@@ -198,8 +207,11 @@ class TrackCosim:
             x = x + self.speed * h
             z = z + np.asarray(vz, float) * h
         zc = z + self.offset
-        pts, surf = self._points(x)
-        out = self.integ.step_contacts(pts, zc, surf, self.c_h)
+        if self._compiled is not None:
+            out = self._compiled.step(x, zc, self.c_h)
+        else:
+            pts, surf = self._points(x)
+            out = self.integ.step_contacts(pts, zc, surf, self.c_h)
         self.Fz = out[:, 0]
         self.parts = out[:, 1:3]
         self.rail_w = out[:, 3]
@@ -213,6 +225,9 @@ class TrackCosim:
         if self.record_every and self.integ.k % self.record_every == 0:
             self._record(x)
         return self.Fz
+
+    def _attach_kernel(self) -> None:
+        self._compiled = CompiledContacts(self.integ, self.sides, self.surfaces) if self.kernel else None
 
     def _record(self, x: np.ndarray) -> None:
         if not self.record_every:
@@ -237,10 +252,11 @@ class TrackCosim:
 
     def set_state(self, s: dict) -> None:
         if s["integ"] is None:
-            self.integ = None
+            self.integ = self._compiled = None
         else:
             if self.integ is None:
                 self.integ = TrackIntegrator(self.model, self.h, np.zeros(self.model.n), alpha=self.alpha)
+                self._attach_kernel()
             self.integ.set_state(s["integ"])
         self.offset, self.z_static = s["offset"].copy(), s["z_static"].copy()
         self.Fz, self.parts, self.rail_w = s["Fz"].copy(), s["parts"].copy(), s["rail_w"].copy()

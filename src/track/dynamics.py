@@ -72,6 +72,12 @@ class _SharedFactor:
     Zb_have: np.ndarray | None = None
     Zb_dofs: np.ndarray | None = None
     new: bool = True
+    # the compiled step's own factorization (track.kernel.LDLFactor) and its influence data
+    ldl: object = None
+    ldl_influence: dict = field(default_factory=dict)
+    ldl_Zb: np.ndarray | None = None
+    ldl_have: np.ndarray | None = None
+    ldl_Zb_dofs: np.ndarray | None = None
 
 
 _FACTORS: dict = {}
@@ -190,7 +196,8 @@ class TrackIntegrator:
         self._Ct = (model.C + Cb).tocsr()
         b, g, a = self.beta, self.gamma, self.alpha
         A = model.M + (1 + a) * (g * h * self._Ct + b * h * h * self._Kt)
-        shared = _shared_factor(A.tocsc())
+        self.step_matrix = A.tocsc()   # M + (1+alpha)(gamma h C + beta h^2 K), constant
+        shared = _shared_factor(self.step_matrix)
         self._lu = shared.lu
         if shared.new:
             self.counters.factorizations += 1
