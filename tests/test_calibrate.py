@@ -17,7 +17,7 @@ import pytest
 from scipy.optimize import brentq
 
 from orchestrator.inverse import calibrate as cal
-from orchestrator.inverse.causes import CATALOGUE
+from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.cli import main
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
