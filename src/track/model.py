@@ -351,8 +351,43 @@ def reference_point(model: TrackModel) -> tuple[str, float, int]:
     return "left", lay.sleepers[k].x, k
 
 
+@dataclass
+class _BodySpec:
+    """A body before reduction: its FE model and the dofs it keeps.
+
+    Attributes
+    ----------
+    name, kind : str
+    origin : float
+        Body coordinate origin [m] (rail: x of its start; sleeper: y of its end).
+    x : float
+        Sleeper position along the track [m] (NaN for rails).
+    sleeper : int
+        Sleeper index (-1 for rails).
+    fom : BeamBody or SolidCrossing
+        The full-order model (the solid comes already reduced).
+    boundary : ndarray or None
+        Retained dofs of a beam body (None for the solid).
+    keys : list of tuple
+        Global keys of the retained coordinates (joints alias them).
+    """
+
+    name: str
+    kind: str
+    origin: float
+    x: float
+    sleeper: int
+    fom: object
+    boundary: np.ndarray | None
+    keys: list
+
+
 def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=None) -> TrackModel:
     """Build the reduced track model.
+
+    Stages: layout (and the solid crossing rail) -> rail-seat points -> FE bodies with
+    their retained dofs -> Craig–Bampton per body (cached) -> global numbering (joints
+    share coordinates) and assembly -> rail pads -> ballast bushings.
 
     Parameters
     ----------
@@ -381,32 +416,61 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
             stats.reductions += 1
             stats.t_solid_mesh, stats.t_solid_reduction = solid.t_mesh, solid.t_reduction
         t0 = time.perf_counter()
-    red = params.reduction
-    f_modes = red.mode_factor * red.f_cut
-    pad, bal = params.rail_pad, params.ballast
-    n_sl = len(lay.sleepers)
+    seats_on = _seat_points(lay, params.rail_pad, solid)
+    specs = _rail_specs(lay, solid, params.reduction.element_length)
+    sleeper_specs, ballast_rows = _sleeper_specs(lay, seats_on, params, stats)
+    specs += sleeper_specs
+    stats.fom_dofs += sum(s.fom.ndof if s.boundary is not None else s.fom.fom_dofs
+                          for s in specs if s.kind != "sleeper")
+    stats.t_mesh_assembly = time.perf_counter() - t0
 
-    # rail seats per sleeper: (rail name, y, stiffness share)
-    seats_on = [[] for _ in range(n_sl)]
+    t1 = time.perf_counter()
+    f_modes = params.reduction.mode_factor * params.reduction.f_cut
+    roms = [_reduce_cached(s.fom, s.boundary, f_modes, stats) if s.boundary is not None else _solid_rom(s.fom)
+            for s in specs]
+    stats.t_reduction = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
+    bodies, n = _number(lay, specs, roms)
+    index = {b.name: k for k, b in enumerate(bodies)}
+    K, M, C, fg = _assemble(bodies, n, params.structural_damping)
+    pads = _pads(lay, bodies, index, seats_on, params.rail_pad)
+    K = K + _spring_matrix(pads.i, pads.j, pads.k, n)
+    C = C + _spring_matrix(pads.i, pads.j, pads.c, n)
+    ballast = _ballast(lay, bodies, index, ballast_rows, params.ballast)
+    stats.t_global = time.perf_counter() - t2
+    stats.rom_dofs = n
+    stats.bodies = len(bodies)
+    return TrackModel(params=params, layout=lay, bodies=bodies, n=n, M=M.tocsr(), K=K.tocsr(),
+                      C=C.tocsr(), f_gravity=fg, pads=pads, ballast=ballast, stats=stats, _index=index)
+
+
+def _seat_points(lay: Layout, pad, solid) -> list[list[tuple]]:
+    """Rail-seat pad points per sleeper: ``(rail name, x, y, stiffness share, bushing index)``."""
+    seats_on = [[] for _ in range(len(lay.sleepers))]
     for r in lay.rails:
         off = solid.params.bushing_offset if (solid is not None and r.name == "crossing") else None
         for seat in r.seats:
             for y, share, kb in _pad_seat_points(seat, r.kind, pad.two_bushings, off):
                 seats_on[seat.sleeper].append((r.name, seat.x, y, share, kb))
-    joint_ends = {(name, end) for j in lay.joints for name, end in j.ends}
+    return seats_on
 
-    # ---- FE bodies and their retained dofs
-    specs = []  # (name, kind, origin, x, sleeper, fom, boundary dofs, dof keys)
+
+def _rail_specs(lay: Layout, solid, element_length: float) -> list[_BodySpec]:
+    """The rails' FE bodies and retained dofs (deflection and rotation at every seat, joint ends)."""
+    joint_ends = {(name, end) for j in lay.joints for name, end in j.ends}
+    specs = []
     for r in lay.rails:
         if solid is not None and r.name == "crossing":
             nb = 4                          # q[:4]: (w, theta) of both end couplings, the joint coordinates
             if not np.array_equal(solid.end_q.ravel(), np.arange(nb)):
                 raise RuntimeError("solid end coordinates are expected first in q")
-            specs.append((r.name, r.kind, r.x_start, np.nan, -1, solid, None, [(r.name, a) for a in range(nb)]))
+            specs.append(_BodySpec(r.name, r.kind, r.x_start, np.nan, -1, solid, None,
+                                   [(r.name, a) for a in range(nb)]))
             continue
         L = r.x_end - r.x_start
         seat_s = np.array([st.x - r.x_start for st in r.seats])
-        fom = beam_body(r.name, mesh_line(L, seat_s, red.element_length), r.profile)
+        fom = beam_body(r.name, mesh_line(L, seat_s, element_length), r.profile)
         bnodes = [fom.node(s) for s in seat_s]
         # deflection and rotation at every seat: the fixed-interface modes are then local
         # to one span (clamped-clamped) and the reduced rail matrices banded
@@ -418,9 +482,15 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
                     if d not in bdofs:
                         bdofs.append(d)
                         keys.append((r.name, d))
-        specs.append((r.name, r.kind, r.x_start, np.nan, -1, fom, np.array(bdofs), keys))
+        specs.append(_BodySpec(r.name, r.kind, r.x_start, np.nan, -1, fom, np.array(bdofs), keys))
+    return specs
 
-    ballast_rows = []  # (sleeper, body name, y, trib length, width)
+
+def _sleeper_specs(lay: Layout, seats_on, params: TrackParams, stats: BuildStats):
+    """The sleepers' FE bodies (deflection retained at the seats and ballast points) and the
+    ballast rows ``(sleeper, body name, y, tributary length, width)``."""
+    bal, element_length = params.ballast, params.reduction.element_length
+    specs, ballast_rows = [], []
     for sl in lay.sleepers:
         L = sl.length
         nb = max(2, int(np.ceil(L / bal.spacing - 1e-9)))
@@ -428,31 +498,24 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
         yb = sl.y_start + trib * (np.arange(nb) + 0.5)
         ys = np.array([y for _, _, y, _, _ in seats_on[sl.index]])
         pts = np.concatenate([ys, yb]) - sl.y_start
-        fom = beam_body(f"sleeper_{sl.index}", mesh_line(L, pts, red.element_length), sl.profile)
+        fom = beam_body(f"sleeper_{sl.index}", mesh_line(L, pts, element_length), sl.profile)
         nodes = sorted({fom.node(s) for s in pts})
         bdofs = [2 * i for i in nodes]
         name = f"sleeper_{sl.index}"
-        specs.append((name, "sleeper", sl.y_start, sl.x, sl.index, fom, np.array(bdofs),
-                      [(name, d) for d in bdofs]))
+        specs.append(_BodySpec(name, "sleeper", sl.y_start, sl.x, sl.index, fom, np.array(bdofs),
+                               [(name, d) for d in bdofs]))
         for y in yb:
             ballast_rows.append((sl.index, name, y, trib, sl.profile.base.width))
         stats.fom_dofs += fom.ndof
-    stats.fom_dofs += sum(sp_[5].ndof if sp_[6] is not None else sp_[5].fom_dofs
-                          for sp_ in specs if sp_[1] != "sleeper")
-    stats.t_mesh_assembly = time.perf_counter() - t0
+    return specs, ballast_rows
 
-    # ---- Craig–Bampton per body (cached)
-    t1 = time.perf_counter()
-    roms = [_reduce_cached(fom, bd, f_modes, stats) if bd is not None else _solid_rom(fom)
-            for (_, _, _, _, _, fom, bd, _) in specs]
-    stats.t_reduction = time.perf_counter() - t1
 
-    # ---- global numbering (joints share boundary coordinates)
-    t2 = time.perf_counter()
+def _number(lay: Layout, specs: list[_BodySpec], roms: list) -> tuple[list[Body], int]:
+    """Global numbering of the reduced coordinates (joints alias the two rail ends) -> bodies, n."""
     alias = {}
     for j in lay.joints:
         for name, end in j.ends:
-            fom = next(s[5] for s in specs if s[0] == name)
+            fom = next(s.fom for s in specs if s.name == name)
             for d in (0, 1):
                 if not isinstance(fom, BeamBody):      # the solid: q positions of its end couplings
                     key = (name, int(fom.end_q[0 if end == "start" else 1, d]))
@@ -462,22 +525,24 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
     gid = {}
     n = 0
     bodies = []
-    for (name, kind, origin, x, sl, fom, bd, keys), rom in zip(specs, roms):
+    for s, rom in zip(specs, roms):
         g = np.empty(rom.nr, dtype=int)
-        for a, key in enumerate(keys):
+        for a, key in enumerate(s.keys):
             key = alias.get(key, key)
             if key not in gid:
                 gid[key] = n
                 n += 1
             g[a] = gid[key]
-        g[len(keys):] = n + np.arange(rom.nr - len(keys))
-        n += rom.nr - len(keys)
-        bodies.append(Body(name, kind, origin, x, sl, fom, rom, g))
-    index = {b.name: k for k, b in enumerate(bodies)}
+        g[len(s.keys):] = n + np.arange(rom.nr - len(s.keys))
+        n += rom.nr - len(s.keys)
+        bodies.append(Body(s.name, s.kind, s.origin, s.x, s.sleeper, s.fom, rom, g))
+    return bodies, n
 
+
+def _assemble(bodies: list[Body], n: int, beta: float):
+    """Global K, M, C = beta K (structural damping) and the gravity load f_g [N] of the bodies."""
     rows, cols, kv, mv = [], [], [], []
     fg = np.zeros(n)
-    beta = params.structural_damping
     for b in bodies:
         r_, c_ = np.meshgrid(b.gdofs, b.gdofs, indexing="ij")
         rows.append(r_.ravel())
@@ -493,9 +558,11 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
     rows, cols = np.concatenate(rows), np.concatenate(cols)
     K = sp.csr_matrix((np.concatenate(kv), (rows, cols)), shape=(n, n))
     M = sp.csr_matrix((np.concatenate(mv), (rows, cols)), shape=(n, n))
-    C = beta * K
+    return K, M, beta * K, fg
 
-    # ---- rail pads
+
+def _pads(lay: Layout, bodies, index, seats_on, pad) -> Pads:
+    """The rail-pad bushings between rail and sleeper coordinates (with the per-sleeper overrides)."""
     overrides = {o.sleeper: o.stiffness_scale for o in pad.overrides}
     pi, pj, pk, pc, psl, prl, py = [], [], [], [], [], [], []
     for sl in lay.sleepers:
@@ -512,11 +579,11 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
             pi.append(i); pj.append(j); psl.append(sl.index); prl.append(rname); py.append(y)
             pk.append(share * pad.stiffness * scale)
             pc.append(share * pad.damping)
-    pads = Pads(np.array(pi), np.array(pj), np.array(pk), np.array(pc), np.array(psl), tuple(prl), np.array(py))
-    K = K + _spring_matrix(pads.i, pads.j, pads.k, n)
-    C = C + _spring_matrix(pads.i, pads.j, pads.c, n)
+    return Pads(np.array(pi), np.array(pj), np.array(pk), np.array(pc), np.array(psl), tuple(prl), np.array(py))
 
-    # ---- ballast
+
+def _ballast(lay: Layout, bodies, index, ballast_rows, bal) -> Ballast:
+    """The bi-linear ballast bushings under the sleepers, each with its void gap [m]."""
     voids = {v.sleeper: np.asarray(v.gaps, float) for v in bal.voids}
     bdof, bk, bc, bgap, bsl, by, barea = [], [], [], [], [], [], []
     for sl_idx, name, y, trib, width in ballast_rows:
@@ -528,13 +595,8 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
         g6 = voids.get(sl_idx)
         bgap.append(0.0 if g6 is None else float(np.interp(y, np.linspace(sl.y_start, sl.y_end, 6), g6)))
         bsl.append(sl_idx); by.append(y); barea.append(trib * width)
-    ballast = Ballast(dof=np.array(bdof), k=np.array(bk), c=np.array(bc), gap=np.array(bgap),
-                      sleeper=np.array(bsl), y=np.array(by), area=np.array(barea))
-    stats.t_global = time.perf_counter() - t2
-    stats.rom_dofs = n
-    stats.bodies = len(bodies)
-    return TrackModel(params=params, layout=lay, bodies=bodies, n=n, M=M.tocsr(), K=K.tocsr(),
-                      C=C.tocsr(), f_gravity=fg, pads=pads, ballast=ballast, stats=stats, _index=index)
+    return Ballast(dof=np.array(bdof), k=np.array(bk), c=np.array(bc), gap=np.array(bgap),
+                   sleeper=np.array(bsl), y=np.array(by), area=np.array(barea))
 
 
 def _solid_rom(sc) -> ReducedBody:
