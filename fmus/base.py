@@ -37,6 +37,17 @@ What pythonfmu 0.7 does, and what this class changes (names are pythonfmu's):
     name.  Modules used by slaves must therefore import their model package
     relatively when bundled (see ``fmus/vehicle_fmus.py``).
 
+(f) Standalone defaults: ``fmus.build`` may bake ``resources/default_experiment.json``
+    (the scenario's duration and step: :meth:`CosimSlave.to_xml` writes it as the
+    ``DefaultExperiment``) and ``resources/start_values.json`` (parameter start values by
+    name, e.g. the vehicle's ``x0`` and ``speed``: :meth:`apply_baked_start_values`, called
+    by subclasses at the end of ``__init__``).
+(g) A non-finite value for a Real parameter is refused when it is set (the previous value
+    stays, so no output turns NaN) and logged with status fmi2Error; the instance then
+    fails its initialization with that message and discards every ``doStep``, until a
+    finite value replaces it before exitInitializationMode.  (pythonfmu gives setters no
+    status to return, and raising would be fmi2Fatal.)
+
 Subclass contract: register variables with :meth:`add_parameter`,
 :meth:`add_input`, :meth:`add_output` in ``__init__``; implement
 :meth:`initialize_model` (called at exitInitializationMode) and :meth:`advance`
@@ -49,6 +60,7 @@ import json
 import logging
 import math
 from abc import abstractmethod
+from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, Optional
 from xml.etree.ElementTree import Element, SubElement
 
@@ -56,6 +68,9 @@ import numpy as np
 from pythonfmu import Fmi2Slave
 from pythonfmu.enums import Fmi2Causality, Fmi2Status, Fmi2Variability
 from pythonfmu.variables import Boolean, Real
+
+EXPERIMENT_FILE = "default_experiment.json"   # in resources/: {"startTime", "stopTime", "stepSize"} [s]
+START_VALUES_FILE = "start_values.json"        # in resources/: {parameter name: start value}
 
 # SI base-unit exponents of the units used in variable descriptions ("-" = dimensionless)
 UNITS: Dict[str, Dict[str, int]] = {
@@ -98,6 +113,7 @@ class CosimSlave(Fmi2Slave):
         self._real_inputs: list = []          # (name, getter) for the finiteness check
         self._failure: Optional[str] = None   # set when initialisation failed
         self._restoring = False               # True while _set_fmu_state restores variables
+        self._rejected: Dict[str, str] = {}   # parameter name -> why its last value was refused
         self.start_time = 0.0
         self.pylog = logging.getLogger(f"fmus.{type(self).__name__}")
 
@@ -117,9 +133,36 @@ class CosimSlave(Fmi2Slave):
         """Register a parameter (variability ``fixed`` unless ``tunable``)."""
         variability = Fmi2Variability.tunable if tunable else Fmi2Variability.fixed
         cls = Boolean if boolean else Real
+        if not boolean:
+            setter = self._finite_setter(name, setter)
         self._register(cls(name, causality=Fmi2Causality.parameter, variability=variability,
                            description=self._describe(description, unit), getter=getter,
                            setter=setter), unit)
+
+    def _finite_setter(self, name: str, setter: Callable[[Any], None]) -> Callable[[Any], None]:
+        """``setter`` refusing non-finite values (module docstring, (g))."""
+        def set_(value):
+            if not math.isfinite(value):
+                self._rejected[name] = f"parameter {name} = {float(value)!r} is not finite"
+                self.log_error(f"{self._rejected[name]}: refused, {name} keeps its value; "
+                               "initialization will fail unless a finite value is set")
+                return
+            self._rejected.pop(name, None)
+            setter(value)
+        return set_
+
+    def apply_baked_start_values(self) -> None:
+        """Set the parameters named in ``resources/start_values.json`` (if present)."""
+        if self.resources is None or not (Path(self.resources) / START_VALUES_FILE).is_file():
+            return
+        values = json.loads((Path(self.resources) / START_VALUES_FILE).read_text(encoding="utf-8"))
+        by_name = {v.name: v for v in self.vars.values()}
+        unknown = sorted(set(values) - {n for n, v in by_name.items()
+                                        if v.causality == Fmi2Causality.parameter})
+        if unknown:
+            raise ValueError(f"{START_VALUES_FILE}: {unknown} are not parameters of {type(self).__name__}")
+        for name, value in values.items():
+            by_name[name].setter(value)
 
     def add_input(self, name: str, description: str, unit: str, getter: Callable[[], float],
                   setter: Callable[[float], None]) -> None:
@@ -147,9 +190,22 @@ class CosimSlave(Fmi2Slave):
         options = {"canGetAndSetFMUstate": True, "canSerializeFMUstate": True}
         options.update(model_options or {})
         root = super().to_xml(options)
+        self._add_default_experiment(root)
         self._add_units(root)
         self._replace_model_structure(root)
         return root
+
+    def _add_default_experiment(self, root: Element) -> None:
+        """Replace ``DefaultExperiment`` by the baked ``resources/default_experiment.json``."""
+        if self.resources is None or not (Path(self.resources) / EXPERIMENT_FILE).is_file():
+            return
+        values = json.loads((Path(self.resources) / EXPERIMENT_FILE).read_text(encoding="utf-8"))
+        node = root.find("DefaultExperiment")
+        if node is None:   # schema order: ... LogCategories, DefaultExperiment, VendorAnnotations, ...
+            node = Element("DefaultExperiment")
+            root.insert(list(root).index(root.find("ModelVariables")), node)
+        node.attrib.clear()
+        node.attrib.update({k: repr(float(v)) for k, v in values.items()})
 
     def _add_units(self, root: Element) -> None:
         used = sorted({u for u in self._units.values() if u != "-"})
@@ -190,6 +246,10 @@ class CosimSlave(Fmi2Slave):
         self.start_time = float(start_time)
 
     def exit_initialization_mode(self):
+        if self._rejected:
+            self._failure = "initialization failed: " + "; ".join(self._rejected.values())
+            self.log_error(self._failure)
+            return
         try:
             self.initialize_model()
         except Exception as exc:  # never raise into pythonfmu (it would free the instance)

@@ -42,7 +42,11 @@ Lazy construction: ``TrackCosim`` needs the communication step, which the FMU
 learns at its first ``doStep``; it is built there, and its first step puts the
 track in static equilibrium under the static wheel loads at the wheels' input
 positions.  The step is fixed from then on: a ``doStep`` with another step size is
-discarded with a log message.  A model failure (``ConvergenceError``: state
+discarded with a log message, and the model description says so
+(``canHandleVariableCommunicationStepSize="false"``).  A wheel whose track coordinate
+lies outside the modelled panel (before the first or after the last sleeper) makes the
+step discarded with a message naming the wheel: the track's response there is that of
+a free rail end, not of a track.  A model failure (``ConvergenceError``: state
 unchanged; ``DivergenceError``: the state is lost, every later step is discarded
 until an FMU state is restored) gives fmi2Discard with the message
 (``fmus.base``).  The FMU state holds the ``TrackCosim`` state, its step and the
@@ -73,6 +77,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any, Dict, Sequence
 
@@ -86,9 +91,13 @@ from .base import UNITS, CosimSlave
 try:  # inside a built FMU the model package is bundled next to this module
     from .track import ballast as _ballast, cosim as _cosim, model as _model, params as _params
     from .track import sensors as _sensors
-except ImportError:  # source tree: src/ on sys.path
+    from .track.solid import crossing as _crossing
+except ModuleNotFoundError as _exc:  # source tree: src/ on sys.path
+    if _exc.name != f"{__package__}.track":
+        raise   # a dependency of the bundled package is missing (scipy, ...): say which
     from track import ballast as _ballast, cosim as _cosim, model as _model, params as _params
     from track import sensors as _sensors
+    from track.solid import crossing as _crossing
 
 # ballast bed stiffness is given per metre of sleeper: N/m per m; accelerations (fmus.base's unit registry)
 UNITS.setdefault("N/m2", {"kg": 1, "m": -1, "s": -2})
@@ -232,6 +241,10 @@ class Track(CosimSlave):
     description = ("Crossing-panel track (Craig-Bampton reduced rails and sleepers, rail pads, bi-linear "
                    "ballast) with Hertz wheel-rail contact on wing rail and nose; vertical dynamics")
     default_experiment = DefaultExperiment(start_time=0.0, stop_time=1.0, step_size=2e-5)
+
+    def to_xml(self, model_options=None):
+        # the step is fixed at the first doStep (module docstring)
+        return super().to_xml({"canHandleVariableCommunicationStepSize": False, **(model_options or {})})
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -463,7 +476,8 @@ class Track(CosimSlave):
     def _build_model(self) -> None:
         params = self.track_params()
         if self._model is None or params != self._built:
-            self._model = _model.build_track(params)
+            # the FMU is an edge: it, not track/, chooses the solid's disk cache (from the host's environment)
+            self._model = _model.build_track(params, cache_dir=_crossing.cache_dir_from_env(os.environ))
             self._built = params
             self._reader = SensorReader(self._model, self._sensors) if self._sensors else None
         self._sensor_values = None
@@ -484,7 +498,19 @@ class Track(CosimSlave):
         if self._values["record_file"] and not self._values["record_every"]:
             self.log_warning("record_file is set but record_every = 0: nothing will be recorded")
 
+    def _check_on_panel(self) -> None:
+        """Raise ValueError if a wheel's input x lies outside the modelled panel."""
+        sleepers = self._model.layout.sleepers
+        lo, hi = sleepers[0].x, sleepers[-1].x
+        outside = np.flatnonzero((self._x < lo) | (self._x > hi))
+        if outside.size:
+            i = int(outside[0])
+            raise ValueError(f"wheel{i + 1}_x = {self._x[i]:.4f} m is outside the modelled panel "
+                             f"[{lo:.4f}, {hi:.4f}] m (first to last sleeper); place the vehicle on it "
+                             "(e.g. the vehicle FMU's parameter x0)")
+
     def advance(self, current_time: float, step_size: float) -> None:
+        self._check_on_panel()
         c = self._cosim
         if c is None:
             c = self._new_cosim(step_size)

@@ -30,7 +30,9 @@ from .base import CosimSlave
 
 try:  # inside a built FMU the model package is bundled next to this module
     from . import vehicle as _vehicle
-except ImportError:  # source tree: src/ on sys.path
+except ImportError as _exc:  # source tree: src/ on sys.path
+    if isinstance(_exc, ModuleNotFoundError) and _exc.name not in (None, f"{__package__}.vehicle"):
+        raise   # a dependency of the bundled package is missing (scipy, ...): say which
     import vehicle as _vehicle
 
 DEFAULT_SPEED = 33.333   # m/s (120 km/h), as in the DESIGN example scenario
@@ -99,6 +101,7 @@ class VehicleSlave(CosimSlave):
                             (f"wheel{n}_z0",))
             self.add_output(f"wheel{n}_vz", f"vertical velocity of wheel {n} ({self._label(i)}), "
                             "upward +", "m/s", lambda i=i: self._wheel_vz(i))
+        self.apply_baked_start_values()   # the scenario's x0, speed, ... (fmus.build, start_values)
 
     # ---------------------------------------------------------------- mapping
     @staticmethod

@@ -404,6 +404,35 @@ def test_divergence_is_discarded_until_a_state_is_restored(instances):
     inst.fmu.freeFMUstate(state)
 
 
+def test_wheel_outside_the_panel_is_discarded_with_its_name(instances):
+    """A wheel before the first sleeper (x < 0 on the plain track, e.g. a vehicle left at
+    x0 = 0 with its rear wheelset behind it): the step is discarded with a message naming
+    the wheel and the panel; moved onto the panel, the run proceeds."""
+    inst = instances("track2", "off_panel").init(speed=5.0)
+    inst.set("x", [-2.5, -2.5])
+    with pytest.raises(FMICallException) as err:
+        inst.fmu.doStep(0.0, H)
+    assert err.value.status == FMI_DISCARD
+    assert "wheel1_x = -2.5000 m is outside the modelled panel" in inst.errors()[-1]
+    inst.set("x", [X_MID, X_MID])
+    inst.fmu.doStep(0.0, H)
+    past_end = PARAMS.layout.sleeper_spacing * (PARAMS.layout.sleepers - 1) + 0.1   # m: beyond the last sleeper
+    inst.set("x", [X_MID, past_end])
+    with pytest.raises(FMICallException):
+        inst.fmu.doStep(H, H)
+    assert "wheel2_x" in inst.errors()[-1]
+
+
+def test_non_finite_parameter_is_refused(instances):
+    """h1 = NaN: refused at setReal (fmi2Error message), initialization fails, doStep discarded."""
+    inst = instances("track2", "nan_param").init(h1=float("nan"))
+    assert any("h1" in m and "not finite" in m for m in inst.errors())
+    assert np.all(np.isfinite(inst.outputs()))
+    with pytest.raises(FMICallException) as err:
+        inst.fmu.doStep(0.0, H)
+    assert err.value.status == FMI_DISCARD
+
+
 def test_invalid_parameter_is_reported_not_fatal(instances):
     inst = instances("track2", "bad").init(void_sleeper=16)    # sleepers 0..15
     assert any("void_sleeper" in m for m in inst.errors())
@@ -471,7 +500,9 @@ def test_gauss_seidel_with_the_bogie_fmu_in_one_process(instances):
 # ------------------------------------------------------------------------------- build
 def test_build_fmus_for_a_scenario(plain_scenario, tmp_path):
     """build-fmus: the track FMU has the scenario vehicle's wheels (bogie: 4) and the
-    scenario's speed and wheel load as start values; both vehicle FMUs are built;
+    scenario's speed and wheel load as start values, extrapolate true (what a generic
+    fixed-step host needs; issue "FMUs that any FMI tool can load") and the scenario's
+    duration and step as DefaultExperiment; both vehicle FMUs are built;
     build_fmu("track") gives the default track for 4 wheels."""
     from orchestrator.cosim.build_job import build_fmus
 
@@ -482,7 +513,11 @@ def test_build_fmus_for_a_scenario(plain_scenario, tmp_path):
     assert "wheel4_Fz" in start and "wheel5_Fz" not in start
     assert float(start["speed"]) == plain_scenario.vehicle.speed
     assert float(start["static_wheel_load"]) == 0.5 * plain_scenario.vehicle.axle_load
-    assert start["extrapolate"] == "false"     # plain_track.yaml runs Gauss-Seidel
+    assert start["extrapolate"] == "true"      # the accurate choice for a Jacobi-like host
+    sim = plain_scenario.simulation
+    for kind in ("track", plain_scenario.vehicle.fmu):
+        ex = read_model_description(str(built[kind])).defaultExperiment
+        assert (float(ex.stopTime), float(ex.stepSize)) == (sim.duration, sim.step), kind
     default = read_model_description(str(build_fmu("track", tmp_path / "default")))
     names = {v.name: v for v in default.modelVariables}
     assert "wheel4_Fz" in names and float(names["impact_angle"].start) == TrackParams().impact_angle

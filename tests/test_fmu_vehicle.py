@@ -311,6 +311,34 @@ def test_invalid_parameter_is_reported_not_fatal(instances):
     assert err.value.status == FMI_DISCARD
 
 
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_non_finite_parameter_is_refused_and_discards(instances, value):
+    """speed = NaN (or inf) on the quarter FMU: refused when set (fmi2Error message naming
+    it; the outputs keep finite values), initialization fails with that message and doStep
+    is discarded: never fmi2OK with NaN outputs."""
+    inst = instances("quarter").init(speed=value)
+    errors = [m for s, m in inst.messages if s == 3]        # fmi2Error messages
+    assert errors and all("speed" in m and "not finite" in m for m in errors)
+    assert np.all(np.isfinite(inst.outputs()))
+    with pytest.raises(FMICallException) as err:
+        inst.fmu.doStep(0.0, 1e-4)
+    assert err.value.status == FMI_DISCARD
+    assert "speed" in [m for s, m in inst.messages if s == 3][-1]
+
+
+def test_finite_value_after_a_refused_one_initializes(instances):
+    """A NaN set and then replaced by a finite value before exitInitializationMode: the run
+    proceeds with the finite value (x = x0 + speed t, 1e-12 relative: rounding)."""
+    inst = instances("quarter")
+    inst.fmu.setupExperiment(startTime=0.0)
+    inst.fmu.enterInitializationMode()
+    inst.fmu.setReal([inst.vr["speed"]], [float("nan")])
+    inst.fmu.setReal([inst.vr["speed"]], [20.0])
+    inst.fmu.exitInitializationMode()
+    inst.fmu.doStep(0.0, 1e-3)
+    np.testing.assert_allclose(inst.get("x")[0], 20.0 * 1e-3, rtol=1e-12)
+
+
 # ------------------------------------------------------------------ several FMUs at once
 def test_bogie_and_quarter_in_one_process(instances):
     """Both FMUs (and two bogie instances) step interleaved in one interpreter, each
