@@ -9,6 +9,7 @@ import pytest
 
 from orchestrator.cosim.master import run_cosim
 from orchestrator.inputs.scenario import load_scenario
+from track import dynamics
 from track.dynamics import TrackIntegrator
 from track.kernel import KERNEL_ENV, LDLFactor, prune
 from track.layout import build_layout
@@ -47,6 +48,9 @@ def test_compiled_step_matches_numpy_reference(monkeypatch):
     res = {}
     for mode in ("numpy", "compiled"):
         monkeypatch.setenv(KERNEL_ENV, mode)
+        # both start from a cold factor cache: influence rows solved by earlier runs in this
+        # process (other tests) would otherwise not be counted as this run's solves
+        monkeypatch.setattr(dynamics, "_FACTORS", {})
         r = run_cosim(sc, backend="inprocess", record_states=True)
         assert r.error is None, r.error
         res[mode] = r

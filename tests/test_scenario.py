@@ -7,7 +7,6 @@ import math
 import pickle
 import re
 import sys
-import types
 from pathlib import Path
 
 import pytest
@@ -255,13 +254,16 @@ def test_wrong_type(make_full_scenario_dict, path, value, fragment):
     assert fragment in err.message
 
 
-def test_numeric_strings_are_numbers(make_full_scenario_dict, tmp_path):
-    data = make_full_scenario_dict()
-    data["track"]["rail_pad"]["stiffness"] = "1.2e8"  # what PyYAML's SafeLoader makes of 1.2e8
-    data["track"]["layout"]["sleepers"] = "30"
-    s = scenario_from_dict(data)
-    assert s.track.rail_pad.stiffness == 1.2e8 and s.track.layout.sleepers == 30
-    # and the file loader reads YAML 1.2 numbers; 1:12 is not the sexagesimal 72
+def test_quoted_numbers_are_type_errors_and_yaml_numbers_are_numbers(make_full_scenario_dict, tmp_path):
+    """A quoted number is a wrong type (the file loader reads 1.2e8 unquoted as a float)."""
+    for path, value, what in ((("track", "rail_pad", "stiffness"), "1.2e8", "a number"),
+                              (("track", "layout", "sleepers"), "30", "an integer")):
+        data = make_full_scenario_dict()
+        set_in(data, path, value)
+        err = error_of(data)
+        assert_one_line_error(err, key_path(path))
+        assert f"expected {what}, got the string {value!r} (write numbers without quotes)" in err.message
+    # the file loader reads YAML 1.2 numbers; 1:12 is not the sexagesimal 72
     path = tmp_path / "s.yaml"
     path.write_text("name: s\ntrack: {layout: {crossing: 1:12}, ballast: {stiffness_per_length: 1e8}}\n"
                     "vehicle: {speed: 10}\n", encoding="utf-8")
@@ -658,13 +660,13 @@ def test_cli_help_exits_0(command, capsys):
 
 @pytest.fixture
 def fake_jobs(monkeypatch):
+    from orchestrator.results import jobs
+
     calls = []
-    module = types.SimpleNamespace(
-        run_scenario=lambda scenario, out_dir, progress=True, backend="fmu":
-            calls.append(("run", scenario, out_dir, progress, backend)) or {},
-        frf_job=lambda scenario, out_dir, at, fmax: calls.append(("frf", scenario, out_dir, at, fmax)) or {},
-    )
-    monkeypatch.setitem(sys.modules, "orchestrator.results.jobs", module)
+    monkeypatch.setattr(jobs, "run_scenario", lambda scenario, out_dir, progress=True, backend="fmu":
+                        calls.append(("run", scenario, out_dir, progress, backend)) or {})
+    monkeypatch.setattr(jobs, "frf_job", lambda scenario, out_dir, at, fmax:
+                        calls.append(("frf", scenario, out_dir, at, fmax)) or {})
     return calls
 
 
@@ -688,6 +690,8 @@ def test_cli_user_error_from_job(monkeypatch, default_scenario_path, capsys):
     def fail(scenario, out_dir, at, fmax):
         raise UserInputError("no rail body named 'nose'\n(have: crossing)")
 
-    monkeypatch.setitem(sys.modules, "orchestrator.results.jobs", types.SimpleNamespace(frf_job=fail))
+    from orchestrator.results import jobs
+
+    monkeypatch.setattr(jobs, "frf_job", fail)
     assert main(["frf", str(default_scenario_path), "--at", "nose:1"]) == 2
     assert capsys.readouterr().err == "turnout: error: no rail body named 'nose' (have: crossing)\n"

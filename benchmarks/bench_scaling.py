@@ -1,0 +1,69 @@
+"""How the co-simulation's cost grows with the panel size and the step (issue "Speed and footprint", item 6).
+
+1. Sleepers: turnouts of 20 ... 160 sleepers (the transition sleeper kept at the middle), the
+   bogie over the same 0.2 s of passage at 120 km/h with the default 100 us step, in-process
+   (the compiled track step). Prints reduced dofs, the loop's wall and us per step, and the
+   exponent p of a least-squares fit wall ~ sleepers^p (target p <= 1.1).
+2. Step: the default scenario's first 0.2 s at steps of 25 ... 200 us: wall per simulated
+   second and us per step (the per-step cost should not depend on h; the count does).
+
+Every case is run twice and the faster kept (numba compilation and the body cache warm up
+in the first). Run: python benchmarks/bench_scaling.py   (record the output in RESULTS.md)
+"""
+from __future__ import annotations
+
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from orchestrator.cosim.master import run_cosim
+from orchestrator.inputs.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT = ROOT / "scenarios" / "crossing_1_12_through_120.yaml"
+SLEEPERS = (20, 40, 80, 160)
+STEPS = (25e-6, 50e-6, 100e-6, 200e-6)
+DURATION = 0.2        # s of passage in every case
+REPEAT = 2
+
+
+def _loop_wall(overrides: list[str]) -> tuple[float, int, int]:
+    """(best loop wall [s], steps, reduced dofs) of the in-process run with ``overrides``."""
+    sc = load_scenario(DEFAULT, overrides=overrides)
+    best, steps, dofs = np.inf, 0, 0
+    for _ in range(REPEAT):
+        res = run_cosim(sc, backend="inprocess", record_states=False)
+        if res.error is not None:
+            raise RuntimeError(f"{overrides}: {res.error}")
+        best = min(best, res.stats.counters.wall_loop)
+        steps, dofs = res.stats.counters.steps, res.track_model.n
+    return best, steps, dofs
+
+
+def sleepers_study() -> float:
+    print(f"{'sleepers':>8} {'dofs':>6} {'steps':>6} {'loop [s]':>9} {'us/step':>8}")
+    walls = []
+    for n in SLEEPERS:
+        wall, steps, dofs = _loop_wall([f"track.layout.sleepers={n}", f"track.layout.transition_sleeper={n // 2 + 1}",
+                                        f"simulation.duration={DURATION}"])
+        walls.append(wall)
+        print(f"{n:8d} {dofs:6d} {steps:6d} {wall:9.3f} {1e6 * wall / steps:8.1f}")
+    p = np.polyfit(np.log(SLEEPERS), np.log(walls), 1)[0]
+    print(f"fitted exponent: wall ~ sleepers^{p:.2f} (target <= 1.1)")
+    return p
+
+
+def step_study() -> None:
+    print(f"{'step [us]':>9} {'steps':>6} {'loop [s]':>9} {'us/step':>8} {'wall per sim. s':>16}")
+    for h in STEPS:
+        wall, steps, _ = _loop_wall([f"simulation.step={h}", f"simulation.output_step={max(h, 1e-4)}",
+                                     f"simulation.duration={DURATION}"])
+        print(f"{1e6 * h:9.0f} {steps:6d} {wall:9.3f} {1e6 * wall / steps:8.1f} {wall / DURATION:16.2f}")
+
+
+if __name__ == "__main__":
+    print(f"bench_scaling: {time.strftime('%Y-%m-%d %H:%M')}, {platform.node()}, {platform.processor() or platform.machine()}")
+    sleepers_study()
+    step_study()
