@@ -135,7 +135,7 @@ def test_hdf5_at_root_with_units_attribute(tmp_path):
 
 def test_csv_comments_unknown_columns_and_semicolons(tmp_path):
     """'#' lines, a column that is not a sensor and ';' as delimiter are read; the column is noted."""
-    t = time_base(20)
+    t = time_base(200)
     sig = passage(t, shift=-0.1)
     lines = ["# site: crossing 1:12", "time;A1;temperature"]
     lines += [f"{float(ti)!r};{float(a)!r};21.5" for ti, a in zip(t, sig["A1"])]

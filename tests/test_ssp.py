@@ -414,3 +414,53 @@ def test_third_party_vehicle_sign_flips(c_vehicle_fmu, tmp_path):
     # (the force it used over step k, from the track's coupling output at the start of the step)
     np.testing.assert_array_equal(res["vehicle.axle1.FL"][1:], -res["track.wheel1_Fz_coupling"][:-1])
     assert np.all(res["track.wheel1_rail_z"] < -1e-4)
+
+
+# ------------------------------------------------------------------------------------------
+# Names other tools accept, the file written as a normal file
+# ------------------------------------------------------------------------------------------
+def test_names_are_identifiers_and_the_scenario_name_is_the_description(ssp_file, scenario):
+    """OMSimulator accepts only identifiers as system and element names; the scenario's own name
+    (``crossing-1-12-through-120``, hyphens) is kept as the description."""
+    import re
+
+    ident = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+    root = _ssd(ssp_file)
+    system = root.find("ssd:System", NS)
+    assert "-" in scenario.name    # the case this test is about
+    assert root.get("name") == system.get("name") == scenario.name.replace("-", "_")
+    assert root.get("description") == system.get("description") == scenario.name
+    names = [e.get("name") for e in system.findall("ssd:Elements/*", NS)]
+    assert sorted(names) == ["track", "vehicle"] and all(ident.match(n) for n in names)
+    assert read_ssp(ssp_file).name == scenario.name.replace("-", "_")
+
+
+def test_ssp_file_has_normal_permissions(ssp_file):
+    """Written as open() would write a new file: 0666 minus the umask (not mkstemp's 0600)."""
+    import os
+
+    umask = os.umask(0)
+    os.umask(umask)
+    assert ssp_file.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+@pytest.mark.parametrize("where", ["device", "folder"])
+def test_out_path_that_is_not_a_regular_file_is_refused(scenario, tmp_path, where):
+    """export-ssp replaced whatever was at --out (temp file + rename), even /dev/null."""
+    import os
+    import stat
+
+    from orchestrator.cli import main
+
+    target = Path(os.devnull) if where == "device" else tmp_path / "a_folder"
+    if where == "folder":
+        target.mkdir()
+    before = target.stat()
+    with pytest.raises(UserInputError, match="exists and is (not a regular file|a folder)"):
+        export_ssp(scenario, target)
+    after = target.stat()
+    assert (stat.S_IFMT(after.st_mode), after.st_ino) == (stat.S_IFMT(before.st_mode), before.st_ino)
+    scen = tmp_path / "s.yaml"
+    from orchestrator.inputs.scenario import dump_scenario
+    dump_scenario(scenario, scen)
+    assert main(["export-ssp", str(scen), "--out", str(target)]) == 2

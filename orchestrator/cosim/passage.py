@@ -1,8 +1,10 @@
 """Where the vehicle runs: its wheels, its start position and the stretch of panel a run covers."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from orchestrator.inputs.errors import UserInputError
-from orchestrator.inputs.specs import PortMap
+from orchestrator.inputs.specs import PortMap, duration_text, step_estimate
 
 POSITION_TOL = 1e-6  # m: the vehicle's wheel 1 must start where the scenario puts it
 START_MARGIN_SLEEPERS = 2  # the rear wheelset starts this many sleepers inside the panel
@@ -59,5 +61,74 @@ def our_ports(n: int) -> list[PortMap]:
     return [PortMap(f"wheel{i}_x", f"wheel{i}_z", f"wheel{i}_vz", f"wheel{i}_Fz") for i in range(1, n + 1)]
 
 
+@dataclass(frozen=True)
+class RunPlan:
+    """What a run of a scenario would do, checked without building the track model (``turnout run --dry-run``).
+
+    Attributes
+    ----------
+    vehicle : str
+        ``bogie``, ``quarter`` or ``external``.
+    n_wheels : int
+    sleepers : int
+        Sleepers of the panel.
+    panel : tuple of float
+        Track coordinates of the first and last sleeper [m].
+    x_start, x_end : float
+        Front wheelset at t = 0 and at the end of the run [m].
+    n_steps : int
+        Communication steps.
+    estimate : float
+        Rough wall time of the stepping loop [s] (:func:`orchestrator.inputs.specs.step_estimate`).
+    """
+
+    vehicle: str
+    n_wheels: int
+    sleepers: int
+    panel: tuple
+    x_start: float
+    x_end: float
+    n_steps: int
+    estimate: float
+
+    def summary(self) -> str:
+        """One line for the user."""
+        return (f"{self.vehicle} vehicle, {self.n_wheels} wheels, front wheelset from x = {self.x_start:.2f} m to "
+                f"{self.x_end:.2f} m on a {self.sleepers}-sleeper panel ({self.panel[0]:.2f}-{self.panel[1]:.2f} m); "
+                f"{self.n_steps} steps, roughly {duration_text(self.estimate)} of stepping")
+
+
+def plan_run(scenario) -> RunPlan:
+    """Check what a run needs besides the scenario's own keys, without building the track model.
+
+    Builds the layout, places the vehicle (:func:`start_position`, :func:`check_passage`),
+    reads the sensor layout file and, for a third-party vehicle FMU, checks its ports and
+    start values against its model description (:mod:`orchestrator.cosim.ports`).
+
+    Raises
+    ------
+    UserInputError
+        The first problem found.
+    """
+    from track.layout import build_layout
+
+    from orchestrator.cosim.ports import check_vehicle_fmu
+    from orchestrator.inputs.sensor_layout import layout_of
+
+    layout = build_layout(scenario.track.layout)
+    x0 = start_position(scenario, layout)
+    check_passage(scenario, layout, x0)
+    kind = vehicle_kind(scenario)
+    if kind == "external":
+        veh = scenario.vehicle
+        check_vehicle_fmu(veh.fmu, veh.ports, veh.start_values)
+    layout_of(scenario)
+    sim = scenario.simulation
+    n = sim.n_steps
+    return RunPlan(kind, n_wheels(scenario), len(layout.sleepers), (layout.sleepers[0].x, layout.sleepers[-1].x),
+                   x0, x0 + scenario.vehicle.speed * sim.duration, n,
+                   step_estimate(n, len(layout.sleepers)))
+
+
 __all__ = ["vehicle_kind", "n_wheels", "wheelset_offsets", "start_position", "check_passage", "our_ports",
-           "POSITION_TOL", "START_MARGIN_SLEEPERS", "END_MARGIN_SLEEPERS"]
+           "plan_run", "RunPlan", "POSITION_TOL", "START_MARGIN_SLEEPERS", "END_MARGIN_SLEEPERS"]

@@ -10,7 +10,7 @@ import difflib
 import re
 from typing import Iterable
 
-__all__ = ["UserInputError", "ScenarioError", "one_line", "did_you_mean"]
+__all__ = ["UserInputError", "UserInputWarning", "ScenarioError", "one_line", "did_you_mean"]
 
 
 def one_line(text: object) -> str:
@@ -37,6 +37,13 @@ class UserInputError(ValueError):
 
     def __init__(self, message: str):
         super().__init__(one_line(message))
+
+
+class UserInputWarning(UserWarning):
+    """Input that is used, but not all of it or not as given (a measured channel dropped, ...).
+
+    The command line prints it as one line ``turnout: warning: ...``.
+    """
 
 
 class ScenarioError(UserInputError):

@@ -12,7 +12,9 @@ channel and the offending value or index. The checks, in order, and why:
    A ``required`` sensor that is absent is an error listing every missing id
    with close matches (:mod:`difflib`); an absent sensor that is not required
    is dropped (noted). A file with no sensor of the layout at all is an error.
-2. **Time.** At least :data:`MIN_SAMPLES` samples; no NaN; strictly increasing
+2. **Time.** At least :data:`MIN_SAMPLES` samples (a measured file: ``min_samples``,
+   100 by default); sampled at :data:`MIN_RATE` or faster (else the time is probably in
+   milliseconds); no NaN; strictly increasing
    (the first decreasing or repeated time is named with its index and both
    times); uniform: ``max |dt_i - median(dt)| <= UNIFORM_TOL * median(dt)``.
    Uniform sampling is what the cross-correlation alignment, the FFT-based
@@ -84,6 +86,7 @@ __all__ = [
     "UNIT_FACTORS",
     "PLAUSIBLE_PEAK",
     "MIN_SAMPLES",
+    "MIN_RATE",
     "UNIFORM_TOL",
     "MAX_NAN_FRACTION",
     "MAX_GAP_SAMPLES",
@@ -94,6 +97,11 @@ __all__ = [
 ]
 
 MIN_SAMPLES = 3            # a step and a check of its uniformity need at least two intervals
+# A passage record sampled below this is not one, or its time is not in seconds: at
+# 120 km/h sleepers 0.6 m apart pass at 55 Hz, so a record that shows them needs
+# > 110 Hz (Nyquist); field systems sample at 0.5-20 kHz. Time in milliseconds read as
+# seconds gives 1-20 Hz.
+MIN_RATE = 100.0           # Hz
 UNIFORM_TOL = 0.01         # max |dt_i - median dt| / median dt (see module docstring, check 2)
 MAX_NAN_FRACTION = 0.20    # a channel with more NaN is a failing sensor (check 3)
 MAX_GAP_SAMPLES = 5        # default max_gap in samples (check 3)
@@ -186,7 +194,8 @@ class _TimeBase:
 # --------------------------------------------------------------------------------------
 def check_measured(columns: Mapping[str, np.ndarray], sensors: Mapping[str, str], *, source: str = "<arrays>",
                    required: Sequence[str] | None = None, max_gap: float | None = None,
-                   units: Mapping[str, str] | None = None, ignored: Sequence[str] = ()) -> MeasuredData:
+                   units: Mapping[str, str] | None = None, ignored: Sequence[str] = (),
+                   min_samples: int = MIN_SAMPLES) -> MeasuredData:
     """Check columns already in memory and build a :class:`MeasuredData`.
 
     The checks of :func:`orchestrator.inputs.measured.read_measured` (which calls this
@@ -203,6 +212,9 @@ def check_measured(columns: Mapping[str, np.ndarray], sensors: Mapping[str, str]
         Name used in messages and kept in the result.
     ignored : sequence of str
         Names the reader already skipped (non-numeric variables, groups); noted.
+    min_samples : int
+        Fewest samples accepted (at least :data:`MIN_SAMPLES`); a measured file asks for
+        more (:data:`orchestrator.inputs.measured.MIN_RECORD_SAMPLES`).
 
     Returns
     -------
@@ -212,6 +224,10 @@ def check_measured(columns: Mapping[str, np.ndarray], sensors: Mapping[str, str]
     check_layout(sensors, name)
     units = dict(units or {})
     present, notes = _select_channels(columns, sensors, required, ignored, name)   # 1. channels
+    n = int(np.size(columns["time"]))
+    if n < max(min_samples, MIN_SAMPLES):
+        raise UserInputError(f"{name}: {n} samples; at least {max(min_samples, MIN_SAMPLES)} are needed "
+                             "(each channel's RMSE rests on them)")
     base, time_note = _time_base(columns["time"], units.get("time"), max_gap, name)   # 2. time
     notes += [time_note] if time_note else []
     channels, mask = {}, {}
@@ -273,6 +289,11 @@ def _time_base(values, unit: str | None, max_gap: float | None, name: str) -> tu
         t = t * t_factor
     _check_time(t, name)
     dt = _mean_step(t)
+    if 1.0 / dt < MIN_RATE:
+        hint = ("; if the time column is in milliseconds, declare it (CSV header 'time [ms]', HDF5 attribute "
+                "'units', MAT struct 'units' or units=...)") if unit is None else ""
+        raise UserInputError(f"{name}: time step {dt:.6g} s ({1.0 / dt:.6g} Hz) is too coarse for a passage record "
+                             f"(at least {MIN_RATE:g} Hz: sleepers pass at ~55 Hz at 120 km/h){hint}")
     gap_limit = MAX_GAP_SAMPLES * dt if max_gap is None else float(max_gap)
     if not gap_limit >= 0.0:
         raise UserInputError(f"{name}: max_gap must be >= 0 s, got {max_gap!r}")
@@ -389,9 +410,7 @@ def _unit_factor(unit: str | None, quantity: str, col: str, name: str) -> tuple[
 
 
 def _check_time(t: np.ndarray, name: str) -> None:
-    """Check 2 on the time vector [s]: enough samples, finite, strictly increasing, uniform."""
-    if len(t) < MIN_SAMPLES:
-        raise UserInputError(f"{name}: time has {len(t)} samples, at least {MIN_SAMPLES} are needed")
+    """Check 2 on the time vector [s] (of at least MIN_SAMPLES samples): finite, strictly increasing, uniform."""
     if np.isnan(t).any() or np.isinf(t).any():
         i = int(np.argmax(~np.isfinite(t)))
         raise UserInputError(f"{name}: time: non-finite value {t[i]} at index {i}")

@@ -101,6 +101,8 @@ def _read_csv(path: Path, name: str) -> RawColumns:
             raise UserInputError(f"{name}: line {header_no}: column {col!r} appears twice in the header")
         names.append(col)
     rows = body[1:]
+    if not rows:
+        raise UserInputError(f"{name}: a header (line {header_no}) but no data rows")
     ncol = len(names)
     try:
         data = np.loadtxt(io.StringIO("\n".join(ln for _, ln in rows)), delimiter=delim, comments="#",

@@ -11,10 +11,15 @@ are the sections' ``post`` checks, run after the per-key checks.
 from __future__ import annotations
 
 import copy
+import dataclasses
+import functools
+import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
-from track.layout import MIN_SLEEPERS
+import numpy as np
+from track.layout import MIN_SLEEPERS, build_layout
 from track.params import (
     RAIL_SECTIONS,
     BallastParams,
@@ -38,20 +43,95 @@ from orchestrator.inputs.schema_nodes import (
     Nullable,
     Num,
     ScalarMap,
+    describe,
     Sign,
     Str,
     dataclass_defaults,
 )
-from orchestrator.inputs.specs import BUILTIN_VEHICLES, STEP_MULTIPLE_RTOL, SimulationSpec, VehicleSpec
+from orchestrator.inputs.specs import (
+    BUILTIN_VEHICLES,
+    STEP_MULTIPLE_RTOL,
+    SimulationSpec,
+    VehicleSpec,
+    duration_text,
+    step_estimate,
+)
 
 __all__ = ["SCHEMA", "KeyDoc", "scenario_keys", "MAX_SPEED", "MAX_IMPACT_ANGLE", "MAX_VOID_GAP", "N_VOID_POINTS",
-           "TURNOUT_ONLY_KEYS"]
+           "TURNOUT_ONLY_KEYS", "PLAUSIBLE", "CROSSING_N", "MAX_STEPS"]
 
 MAX_SPEED = 120.0  # m/s (432 km/h): above any train this model is meant for
 MAX_IMPACT_ANGLE = 0.05  # rad: 50 mrad is far beyond a severely worn crossing (18 mrad)
 MAX_VOID_GAP = 0.05  # m: a 5 cm gap means the sleeper hangs; not a ballast void any more
 N_VOID_POINTS = 6  # gaps are given at 6 equidistant points along the sleeper (DESIGN.md §3)
 TURNOUT_ONLY_KEYS = ("crossing", "radius", "route", "hand", "transition_sleeper")
+
+# Plausibility ranges (lower, upper, reason): values outside them are typing mistakes or
+# another unit, not a track or vehicle anyone builds; each range keeps a margin of about
+# a decade (stiffnesses) or 2x (lengths) around what the literature reports.
+PLAUSIBLE = {
+    # EN 13232 turnout families: yard and tram turnouts from R ~ 150 m (1:6 - 1:7), main-line
+    # R 190-1200 m (1:9 - 1:18.5), high-speed up to R ~ 10 000 m (1:46 - 1:65)
+    "radius": (100.0, 20000.0, "(turnout radii run from ~150 m, yard, to ~10 km, high-speed)"),
+    # concrete sleepers and turnout bearers 0.6-0.65 m apart (seed 001; DESIGN.md §6 case 0.6 m),
+    # timber sleepers up to ~0.75 m
+    "sleeper_spacing": (0.3, 1.0, "(sleepers are laid 0.6-0.75 m apart)"),
+    # a crossing panel is 20-40 sleepers (DESIGN.md §4.2: 40); 300 (~180 m) spans a whole 1:65 turnout
+    "sleepers": (MIN_SLEEPERS, 300, "(a crossing panel has 20-40 sleepers; 300 span a whole high-speed turnout)"),
+    # 600 mm narrow gauge to 1676 mm broad gauge
+    "gauge": (0.6, 1.7, "(track gauges run from 0.6 m to 1.676 m)"),
+    # plain-line sleepers 2.6 m, turnout bearers 2.6-5 m (DESIGN.md §7)
+    "sleeper_length": (1.0, 6.0, "(sleepers are 2.6 m, bearers up to 5 m long, DESIGN.md §7)"),
+    # DESIGN.md §7: 120 MN/m (soft) to 1200 MN/m (direct fixing)
+    "pad_stiffness": (1e7, 1e10, "(rail pads: 120-1200 MN/m, DESIGN.md §7)"),
+    # measured rail-pad damping is 1e4-1e5 N s/m per seat (seed 001 uses 2e4)
+    "pad_damping": (0.0, 1e6, "(rail-pad damping is 1e4-1e5 N s/m)"),
+    # DESIGN.md §7: bedding modulus 0.05-0.40 N/mm^3 times a 0.26-0.30 m sleeper base
+    # = 1.3e7-1.2e8 N/m per m of sleeper
+    "ballast_stiffness": (1e6, 1e9, "(ballast: 0.05-0.40 N/mm^3 on a 0.26-0.30 m wide sleeper, "
+                                    "i.e. 1.3e7-1.2e8 N/m per m, DESIGN.md §7)"),
+    # ballast damping per metre of sleeper of the same order as the pads' (seed 001: 3e4)
+    "ballast_damping": (0.0, 1e6, "(ballast damping is ~1e4-1e5 N s/m per m of sleeper)"),
+    # the cause catalogue fits h1 in 0.2-5 and h2 in 0.05-20 (orchestrator.inputs.causes)
+    "stiffness_scale": (0.01, 100.0, "(a scale factor; the diagnosis fits 0.05-20)"),
+    # bushings at most 0.5 m apart: each 2 x SIDE_WINDOW (0.6 m) wide region under a rail
+    # seat holds one (orchestrator.results.analysis), the 6 void points along a 2.6 m
+    # sleeper (0.52 m apart, DESIGN.md §3) each shape the gap; below 2 cm they add dofs, not detail
+    "ballast_spacing": (0.02, 0.5, "(at most 0.5 m, so that the void shape and the pressure "
+                                   "under each rail seat are resolved)"),
+    # DESIGN.md §7: axle load 20 t (196 kN); heavy haul runs up to 40 t (392 kN)
+    "axle_load": (1e4, 5e5, "(axle loads are 10-40 t, i.e. 98-392 kN; DESIGN.md §7: 20 t)"),
+    # DESIGN.md §8: the stiff Hertz contact needs 10-200 us steps; 1e-7 s is 100x below
+    # the finest useful step, and above 10 ms a wheel at 33 m/s crosses half a sleeper bay per step
+    "step": (1e-7, 1e-2, "(useful steps are 10-200 us, DESIGN.md §8)"),
+    # the vehicle must stay on a panel of at most ~180 m (see sleepers): 180 m at 1 m/s
+    "duration": (0.0, 200.0, "(a passage over the modelled panel lasts well under a minute)"),
+}
+CROSSING_N = (3.0, 100.0)  # 1:n; crossings in service run from ~1:4.5 (tram, yard) to 1:65 (high-speed)
+# Refused above this many communication steps: at ~0.45 ms per step for the 40-sleeper
+# default (benchmarks/RESULTS.md, in-process loop) 1e7 steps take more than an hour.
+MAX_STEPS = 10_000_000
+
+
+def _plausible(key: str, *, integer: bool = False, unit: str = "", gt0: bool = False) -> Num:
+    """A number within :data:`PLAUSIBLE` ``[key]`` (``> 0`` first when ``gt0``: keeps "must be > 0")."""
+    lo, hi, why = PLAUSIBLE[key]
+    return _Ranged(lo, hi, why, integer=integer, unit=unit, gt0=gt0)
+
+
+class _Ranged(Num):
+    """A number checked for its sign first (the usual "must be > 0" / ">= 0"), then for plausibility."""
+
+    def __init__(self, lo, hi, why, *, integer=False, unit="", gt0=False):
+        super().__init__(gt=0 if gt0 else None, ge=None if gt0 else lo, le=hi, integer=integer, unit=unit,
+                         why=why)
+        self._lo = lo if gt0 else None
+
+    def check(self, value, path, ctx):
+        x = super().check(value, path, ctx)
+        if self._lo is not None and x < self._lo:
+            raise Invalid(path, f"must be >= {self._lo:g}{self.unit}, got {x:g} {self.why}")
+        return x
 
 # Nodes shared by several sections (nodes keep no state between checks).
 _POS = Num(gt=0)
@@ -60,6 +140,7 @@ _INDEX = Num(ge=0, integer=True)
 _SIGN = Sign()
 _VARIABLE_NAME = Str(pattern=r".+\Z", pattern_doc="a non-empty variable name")
 _ANGLE = Num(ge=0, le=MAX_IMPACT_ANGLE, unit=" rad")
+_SCALE = _plausible("stiffness_scale", gt0=True)
 
 
 # --------------------------------------------------------------------------------------
@@ -70,8 +151,14 @@ def _post_layout(out, given, path, ctx):
 
     Returns the layout without the turnout-only keys when it is plain track.
     """
-    if out["type"] == "turnout" and float(out["crossing"].split(":")[1]) <= 1.0:
-        raise Invalid(path + ("crossing",), f'expected "1:n" with n > 1, got {out["crossing"]!r}')
+    if out["type"] == "turnout":
+        n = float(out["crossing"].split(":")[1])
+        if n <= 1.0:
+            raise Invalid(path + ("crossing",), f'expected "1:n" with n > 1, got {out["crossing"]!r}')
+        if not CROSSING_N[0] <= n <= CROSSING_N[1]:
+            raise Invalid(path + ("crossing",), f'expected "1:n" with n from {CROSSING_N[0]:g} to '
+                                                f'{CROSSING_N[1]:g} (crossings in service run from about '
+                                                f'1:4.5 to 1:65), got {out["crossing"]!r}')
     if out["type"] == "plain":
         for key in given:
             if key in TURNOUT_ONLY_KEYS:
@@ -85,7 +172,36 @@ def _post_layout(out, given, path, ctx):
     if ts is not None and ts >= out["sleepers"]:
         raise Invalid(path + ("transition_sleeper",),
                       f"sleeper index {ts} is outside 0..{out['sleepers'] - 1}")
+    _check_geometry(out, path)
     return out
+
+
+def _check_geometry(layout: dict, path: tuple) -> None:
+    """The layout must build (:func:`track.layout.build_layout`): the panel covers the crossing, starts
+    after the curve start, ... Its error names the keys (``"sleepers/transition_sleeper: ..."``)."""
+    message = _geometry_error(tuple(sorted(layout.items())))
+    if message is None:
+        return
+    head, sep, rest = message.partition(": ")
+    keys = head.split("/") if sep else []
+    if keys and all(k in layout for k in keys):
+        also = f" (with {', '.join(keys[1:])})" if len(keys) > 1 else ""
+        raise Invalid(path + (keys[0],), f"the layout does not build{also}: {rest}")
+    raise Invalid(path, f"the layout does not build: {message}")
+
+
+@functools.lru_cache(maxsize=256)
+def _geometry_error(items: tuple) -> str | None:
+    """``build_layout``'s complaint about a layout given as sorted (key, value) pairs, or None.
+
+    Cached: sweeps and calibrations validate the same layout for every run (~2 ms each).
+    """
+    try:
+        with np.errstate(all="ignore"):  # a degenerate geometry reports itself below, not as a warning
+            build_layout(LayoutParams(**dict(items)))
+    except (ValueError, ArithmeticError) as exc:
+        return str(exc)
+    return None
 
 
 def _check_sleeper_items(items: list, n: int, path: tuple):
@@ -109,6 +225,9 @@ def _post_track(out, given, path, ctx):
     if out["model"] == "solid" and layout["type"] == "plain":
         raise Invalid(path + ("model",), "'solid' models the 3D crossing rail; a plain layout has none "
                                          "(use model: beam)")
+    if layout["type"] == "turnout" and out["dipped_joint"] > 0.0:
+        raise Invalid(path + ("dipped_joint",), "only for plain track (the Jenkins P2 verification case); "
+                                                "a turnout's geometry defect is track.crossing.impact_angle")
     _check_sleeper_items(out["rail_pad"]["overrides"], n, path + ("rail_pad", "overrides"))
     _check_sleeper_items(out["ballast"]["voids"], n, path + ("ballast", "voids"))
     return out
@@ -120,6 +239,7 @@ def _post_vehicle(out, given, path, ctx):
     if out["fmu"] in BUILTIN_VEHICLES:
         if ports:
             raise Invalid(path + ("ports",), f"only for a third-party FMU; fmu: {out['fmu']} has its own ports")
+        _check_builtin_start_values(out, path + ("start_values",))
     else:
         if not ports:
             raise Invalid(path + ("ports",), "a third-party FMU needs one ports entry per wheel "
@@ -133,11 +253,42 @@ def _post_vehicle(out, given, path, ctx):
     return out
 
 
+def _check_builtin_start_values(vehicle: dict, path: tuple) -> None:
+    """Start values of our bogie / quarter FMU that name its parameters: the right type, and a
+    vehicle the parameter class accepts (positive masses and stiffnesses, a car body left
+    after the wheelsets, ...). Other names are left to the run, which lists the FMU's variables."""
+    from vehicle.bogie import BogieParams  # the vehicle models' own checks (src/vehicle)
+    from vehicle.quarter import QuarterParams
+
+    cls = BogieParams if vehicle["fmu"] == "bogie" else QuarterParams
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    given = vehicle["start_values"]
+    for name, value in given.items():
+        numeric = name in ("speed", "x0") or re.fullmatch(r"wheel\d+_z0", name) or \
+            (name in fields and fields[name].type in ("float", float))
+        if name in fields and fields[name].type in ("bool", bool):
+            if not isinstance(value, bool):
+                raise Invalid(path + (name,), f"expected true or false, got {describe(value)}")
+        elif numeric and (isinstance(value, (bool, str)) or not math.isfinite(value)):
+            raise Invalid(path + (name,), f"expected a number, got {describe(value)}")
+    params = {k: v for k, v in given.items() if k in fields}
+    try:
+        cls(**{"axle_load": vehicle["axle_load"], **params})
+    except (ValueError, TypeError) as exc:
+        culprit = next((k for k in params if k in str(exc)), None)
+        raise Invalid(path + ((culprit,) if culprit else ()), f"not a valid {vehicle['fmu']}: {exc}") from None
+
+
 def _post_simulation(out, given, path, ctx):
     """``simulation`` checked as a whole: ``output_step`` within ``duration`` and a multiple of ``step``."""
     step, out_step = out["step"], out["output_step"]
     if out_step > out["duration"]:
         raise Invalid(path + ("output_step",), f"must not exceed duration ({out['duration']:g} s), got {out_step:g}")
+    n_steps = out["duration"] / step
+    if n_steps > MAX_STEPS:
+        raise Invalid(path + ("step",), f"{out['duration']:g} s in steps of {step:g} s is {n_steps:.3g} steps, "
+                                        f"more than {MAX_STEPS:.0e} (about {duration_text(step_estimate(n_steps))} "
+                                        f"of computing); use a larger step or a shorter duration")
     ratio = out_step / step
     if ratio < 1.0 - STEP_MULTIPLE_RTOL or abs(ratio - round(ratio)) > STEP_MULTIPLE_RTOL * ratio:
         raise Invalid(path + ("output_step",),
@@ -155,17 +306,19 @@ def _layout_section() -> Map:
         "type": Field(Str(("plain", "turnout")), L["type"], "plain track or turnout crossing panel"),
         "crossing": Field(Str(pattern=r"1:(\d+(\.\d*)?|\.\d+)\Z", pattern_doc='"1:n" with n > 1, e.g. "1:12"'),
                           L["crossing"], "crossing ratio 1:n (tan of the crossing angle = 1/n); turnout only"),
-        "radius": Field(_POS, L["radius"], "[m] turnout radius; turnout only"),
-        "sleeper_spacing": Field(_POS, L["sleeper_spacing"], "[m] sleeper centre distance"),
-        "sleepers": Field(Num(ge=MIN_SLEEPERS, integer=True), L["sleepers"],
+        "radius": Field(_plausible("radius", unit=" m", gt0=True), L["radius"], "[m] turnout radius; turnout only"),
+        "sleeper_spacing": Field(_plausible("sleeper_spacing", unit=" m", gt0=True), L["sleeper_spacing"],
+                                 "[m] sleeper centre distance"),
+        "sleepers": Field(_plausible("sleepers", integer=True), L["sleepers"],
                           "number of sleepers, indexed 0..N-1 along the track"),
         "route": Field(Str(("through", "diverging")), L["route"], "route the vehicle runs on; turnout only"),
         "hand": Field(Str(("left", "right")), L["hand"], "side the diverging route turns to; turnout only"),
-        "gauge": Field(_POS, L["gauge"], "[m] track gauge"),
+        "gauge": Field(_plausible("gauge", unit=" m", gt0=True), L["gauge"], "[m] track gauge"),
         "rail": Field(Str(tuple(RAIL_SECTIONS)), L["rail"], "rail profile"),
         "transition_sleeper": Field(Nullable(_INDEX), L["transition_sleeper"],
                                     "sleeper under the wing rail -> nose transfer; null: N // 2 + 1; turnout only"),
-        "sleeper_length": Field(_POS, L["sleeper_length"], "[m] plain-line sleeper length (> gauge)"),
+        "sleeper_length": Field(_plausible("sleeper_length", unit=" m", gt0=True), L["sleeper_length"],
+                                "[m] plain-line sleeper length (> gauge)"),
     }, post=_post_layout)
 
 
@@ -173,12 +326,13 @@ def _rail_pad_section() -> Map:
     """``track.rail_pad``: pad stiffness and damping, global and per sleeper (defaults: RailPadParams)."""
     P = dataclass_defaults(RailPadParams)
     return Map({
-        "stiffness": Field(_POS, P["stiffness"], "[N/m] per rail seat"),
-        "damping": Field(_NONNEG, P["damping"], "[N s/m] per rail seat"),
-        "stiffness_scale": Field(_POS, P["stiffness_scale"], "[-] global scale h2"),
+        "stiffness": Field(_plausible("pad_stiffness", unit=" N/m", gt0=True), P["stiffness"],
+                           "[N/m] per rail seat"),
+        "damping": Field(_plausible("pad_damping", unit=" N s/m"), P["damping"], "[N s/m] per rail seat"),
+        "stiffness_scale": Field(_SCALE, P["stiffness_scale"], "[-] global scale h2"),
         "overrides": Field(List(Map({
             "sleeper": Field(_INDEX, doc="sleeper index 0..N-1 (each at most once)"),
-            "stiffness_scale": Field(_POS, doc="[-] scale of the pads on that sleeper (times h2)"),
+            "stiffness_scale": Field(_SCALE, doc="[-] scale of the pads on that sleeper (times h2)"),
         })), [], "local pad stiffness"),
         "two_bushings": Field(Bool(), P["two_bushings"], "two bushings across the wide crossing-rail seat"),
     })
@@ -188,15 +342,18 @@ def _ballast_section() -> Map:
     """``track.ballast``: ballast stiffness and damping, voids under sleepers (defaults: BallastParams)."""
     B = dataclass_defaults(BallastParams)
     return Map({
-        "stiffness_per_length": Field(_POS, B["stiffness_per_length"], "[N/m per m of sleeper]"),
-        "damping_per_length": Field(_NONNEG, B["damping_per_length"], "[N s/m per m of sleeper]"),
-        "stiffness_scale": Field(_POS, B["stiffness_scale"], "[-] global scale h1"),
+        "stiffness_per_length": Field(_plausible("ballast_stiffness", unit=" N/m per m", gt0=True),
+                                      B["stiffness_per_length"], "[N/m per m of sleeper]"),
+        "damping_per_length": Field(_plausible("ballast_damping", unit=" N s/m per m"), B["damping_per_length"],
+                                    "[N s/m per m of sleeper]"),
+        "stiffness_scale": Field(_SCALE, B["stiffness_scale"], "[-] global scale h1"),
         "voids": Field(List(Map({
             "sleeper": Field(_INDEX, doc="sleeper index 0..N-1 (each at most once)"),
             "gaps": Field(List(Num(ge=0, lt=MAX_VOID_GAP, unit=" m"), length=N_VOID_POINTS),
                           doc="[m] gap at 6 equidistant points from end to end"),
         })), [], "ballast voids"),
-        "spacing": Field(_POS, B["spacing"], "[m] max distance between ballast bushings along a sleeper"),
+        "spacing": Field(_plausible("ballast_spacing", unit=" m", gt0=True), B["spacing"],
+                         "[m] max distance between ballast bushings along a sleeper"),
     })
 
 
@@ -237,7 +394,7 @@ def _vehicle_section() -> Map:
     return Map({
         "fmu": Field(FilePath(".fmu", BUILTIN_VEHICLES), V["fmu"], "vehicle model"),
         "speed": Field(Num(gt=0, le=MAX_SPEED, unit=" m/s"), doc="[m/s] constant speed"),
-        "axle_load": Field(_POS, V["axle_load"], "[N] static axle load"),
+        "axle_load": Field(_plausible("axle_load", unit=" N", gt0=True), V["axle_load"], "[N] static axle load"),
         "ports": Field(List(Map({
             "x": Field(_VARIABLE_NAME, doc="output: wheel track coordinate [m]"),
             "z": Field(_VARIABLE_NAME, doc="output: wheel vertical position [m]"),
@@ -255,8 +412,9 @@ def _simulation_section() -> Map:
     """``simulation``: duration, steps and master algorithm (defaults: SimulationSpec)."""
     S = dataclass_defaults(SimulationSpec)
     return Map({
-        "duration": Field(_POS, S["duration"], "[s] simulated time"),
-        "step": Field(_POS, S["step"], "[s] communication step"),
+        "duration": Field(Num(gt=0, le=PLAUSIBLE["duration"][1], unit=" s", why=PLAUSIBLE["duration"][2]),
+                          S["duration"], "[s] simulated time"),
+        "step": Field(_plausible("step", unit=" s", gt0=True), S["step"], "[s] communication step"),
         "output_step": Field(_POS, S["output_step"], "[s] output interval (integer multiple of step)"),
         "algorithm": Field(Str(("gauss-seidel", "jacobi")), S["algorithm"], "co-simulation master algorithm"),
         "extrapolation": Field(Bool(), S["extrapolation"], "extrapolate wheel inputs over a step"),

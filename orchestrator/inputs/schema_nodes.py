@@ -81,15 +81,21 @@ class Node:
         raise Invalid(path, "is a single value: it has no sub-keys or items")
 
 
-# Numeric strings that PyYAML (YAML 1.1) leaves as str, e.g. "1.2e8" or "1e8".
+# Strings that read as numbers ("1.2e8", " 30"): refused with a hint to drop the quotes.
 _NUMERIC_STR = re.compile(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?\Z")
 
 
 class Num(Node):
-    """A number (or integer) within optional bounds; numeric strings such as ``"1.2e8"`` are accepted."""
+    """A number (or integer) within optional bounds.
 
-    def __init__(self, gt=None, ge=None, lt=None, le=None, integer=False, unit=""):
+    A string is an error even when it reads as a number (``"1.2e8"``): the scenario
+    loader reads YAML 1.2 numbers (``1.2e8`` unquoted is a float), so a quoted number
+    is a typing mistake, and wrong types are errors.
+    """
+
+    def __init__(self, gt=None, ge=None, lt=None, le=None, integer=False, unit="", why=""):
         self.gt, self.ge, self.lt, self.le, self.integer, self.unit = gt, ge, lt, le, integer, unit
+        self.why = why  # appended to a range error, e.g. "(rail pads: 120-1200 MN/m, DESIGN.md §7)"
         bounds = [f"> {gt:g}" if gt is not None else "", f">= {ge:g}" if ge is not None else "",
                   f"< {lt:g}" if lt is not None else "", f"<= {le:g}" if le is not None else ""]
         self.doc = ("integer" if integer else "number") + "".join(f" {b}" for b in bounds if b)
@@ -97,7 +103,7 @@ class Num(Node):
     def check(self, value, path, ctx):
         what = "an integer" if self.integer else "a number"
         if isinstance(value, str) and _NUMERIC_STR.match(value.strip()):
-            value = float(value.strip())
+            raise Invalid(path, f"expected {what}, got the string {value!r} (write numbers without quotes)")
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise Invalid(path, f"expected {what}, got {describe(value)}")
         x = float(value)
@@ -110,7 +116,8 @@ class Num(Node):
         for bound, ok, op in ((self.gt, lambda b: x > b, ">"), (self.ge, lambda b: x >= b, ">="),
                               (self.lt, lambda b: x < b, "<"), (self.le, lambda b: x <= b, "<=")):
             if bound is not None and not ok(bound):
-                raise Invalid(path, f"must be {op} {bound:g}{self.unit}, got {x:g}")
+                why = f" {self.why}" if self.why else ""
+                raise Invalid(path, f"must be {op} {bound:g}{self.unit}, got {x:g}{why}")
         return x
 
 

@@ -11,10 +11,33 @@ from dataclasses import dataclass, field
 
 from track.timegrid import step_count
 
-__all__ = ["BUILTIN_VEHICLES", "STEP_MULTIPLE_RTOL", "PortMap", "VehicleSpec", "SimulationSpec"]
+__all__ = ["BUILTIN_VEHICLES", "STEP_MULTIPLE_RTOL", "SECONDS_PER_STEP", "REFERENCE_SLEEPERS", "PortMap",
+           "VehicleSpec", "SimulationSpec", "step_estimate", "duration_text"]
 
 BUILTIN_VEHICLES = ("bogie", "quarter")  # vehicle.fmu values that select our own FMUs
 STEP_MULTIPLE_RTOL = 1e-9  # output_step / step must be this close to an integer
+# Wall time of one communication step of the 40-sleeper default scenario (1741 reduced dofs):
+# 2.23 s for 5000 steps in-process, 2.78 s through the FMUs (benchmarks/RESULTS.md, bench_cosim.py;
+# 64 sleepers: 0.57 ms). A rough scale for estimates and refusals, not a promise.
+SECONDS_PER_STEP = 4.5e-4
+REFERENCE_SLEEPERS = 40
+
+
+def step_estimate(n_steps: float, sleepers: int = REFERENCE_SLEEPERS) -> float:
+    """Rough wall time [s] of ``n_steps`` communication steps on a panel of ``sleepers`` sleepers.
+
+    Proportional to the number of sleepers (the reduced dofs grow with them), never below the
+    40-sleeper figure (:data:`SECONDS_PER_STEP`: the per-step overhead does not shrink).
+    """
+    return float(n_steps) * SECONDS_PER_STEP * max(1.0, sleepers / REFERENCE_SLEEPERS)
+
+
+def duration_text(seconds: float) -> str:
+    """A wall time [s] as a person reads it: ``"2.2 s"``, ``"37 min"``, ``"25 h"``, ``"41 days"``."""
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.2g} {unit}"
+    return f"{seconds:.2g} s"
 
 
 @dataclass(frozen=True)

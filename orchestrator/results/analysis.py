@@ -45,6 +45,28 @@ def seat_y(model: TrackModel, sleeper: int, side: str) -> float:
     return float(np.mean(ys))
 
 
+def side_region(y_p: np.ndarray, y_seat: float) -> np.ndarray:
+    """Bushings under a rail seat: those within SIDE_WINDOW of ``y_seat`` [m], else the nearest one.
+
+    Parameters
+    ----------
+    y_p : ndarray, shape (nb,)
+        Lateral positions of a sleeper's ballast bushings [m] (nb >= 1).
+    y_seat : float
+        Lateral position of the rail seat [m].
+
+    Returns
+    -------
+    ndarray of bool, shape (nb,)
+        Never empty: bushings coarser than the window still give the seat a pressure.
+    """
+    d = np.abs(np.asarray(y_p, float) - y_seat)
+    near = d <= SIDE_WINDOW
+    if not near.any():
+        near = d == d.min()
+    return near
+
+
 def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
     """Scalars and arrays of a co-simulation result (needs ``res.track_record``)."""
     side, x_ref, k_tr = reference_point(model)
@@ -71,7 +93,7 @@ def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
     y_p, p_t = sleeper_pressure(model, k_tr, rec["q"], rec["v"])
     j_r, j_s = int(np.argmax(rail_hist.max(axis=1))), int(np.argmax(sl.moment.max(axis=1)))
     y_cross, y_field = seat_y(model, k_tr, side), seat_y(model, k_tr, "right" if side == "left" else "left")
-    near_c, near_f = np.abs(y_p - y_cross) <= SIDE_WINDOW, np.abs(y_p - y_field) <= SIDE_WINDOW
+    near_c, near_f = side_region(y_p, y_cross), side_region(y_p, y_field)
     s.update({
         "max_rail_moment": float(rail_hist.max()), "time_max_rail_moment": float(rec["t"][j_r]),
         "max_sleeper_moment": float(sl.moment.max()), "time_max_sleeper_moment": float(rec["t"][j_s]),

@@ -57,7 +57,8 @@ from pathlib import Path
 from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.cosim import passage
 from orchestrator.cosim.ssp.ssd import TRACK, VEHICLE, Component, Connection, step_ns
-from orchestrator.cosim.ssp.writer import model_variables, write_ssp
+from orchestrator.cosim.ports import check_vehicle_fmu
+from orchestrator.cosim.ssp.writer import check_out_file, model_variables, write_ssp
 from orchestrator.inputs.errors import UserInputError
 
 
@@ -192,7 +193,10 @@ def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
     ----------
     scenario : orchestrator.inputs.scenario.Scenario
     out_file : Path
-        The ``.ssp`` file to write (its folder is created; an existing file is replaced).
+        The ``.ssp`` file to write (its folder is created; an existing regular file is replaced,
+        anything else there is refused). The system is named after ``scenario.name`` made an
+        identifier (``crossing_1_12_through_120``; OMSimulator accepts no other names), and the
+        name itself is its description.
     fmu_dir : Path, optional
         Folder of prebuilt FMUs: ``bogie.fmu`` / ``quarter.fmu`` are taken from there when
         present, and ``track.fmu`` when its baked parameters (``resources/track_fmu.json``)
@@ -212,12 +216,15 @@ def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
         start values, a step that is not a whole number of nanoseconds.
     """
     out_file = Path(out_file)
+    check_out_file(out_file)  # before the FMUs are built
     try:
         step_ns(scenario.simulation.step)
     except UserInputError as exc:
         raise UserInputError(f"simulation.step: {exc}") from None
     n = _n_wheels(scenario)
     vehicle_values = vehicle_parameters(scenario)
+    if not scenario.vehicle.builtin:  # ports and start values against the FMU, before the track FMU is built
+        check_vehicle_fmu(scenario.vehicle.fmu, scenario.vehicle.ports, vehicle_values)
     if scenario.vehicle.builtin:  # the wheels must stay on the modelled panel (as in `turnout run`)
         from track.layout import build_layout
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tempfile
 import zipfile
 from dataclasses import dataclass
@@ -17,10 +18,22 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
+from orchestrator.cosim.ports import read_fmu_description
 from orchestrator.cosim.ssp.ssd import OSP_ANNOTATION, SSD_FILE, Component, Connection, qname, step_ns
 from orchestrator.inputs.errors import UserInputError
 
 _ZIP_DATE = (2000, 1, 1, 0, 0, 0)  # fixed member dates: the same input gives the same archive
+_FILE_MODE = 0o666  # the archive's permissions before the umask, as open() gives a new file
+
+
+def identifier(name: str) -> str:
+    """``name`` as an identifier (letters, digits, ``_``; not starting with a digit).
+
+    SSP tools address systems and elements by name, and some (OMSimulator) accept only
+    identifiers there: ``crossing-1-12-through-120`` -> ``crossing_1_12_through_120``.
+    """
+    out = re.sub(r"\W", "_", str(name), flags=re.ASCII) or "system"
+    return "_" + out if out[0].isdigit() else out
 
 
 @dataclass(frozen=True)
@@ -36,21 +49,9 @@ class _Var:
     value_reference: int
 
 
-def _model_description(fmu: Path):
-    from fmpy import read_model_description
-
-    try:
-        return read_model_description(str(fmu), validate=False)
-    except Exception as exc:  # not a zip, no modelDescription.xml, bad XML
-        raise UserInputError(f"{fmu}: not a readable FMU ({exc})") from None
-
-
 def model_variables(fmu: Path) -> Dict[str, _Var]:
     """The variables of an FMI 2.0 co-simulation FMU by name (:class:`UserInputError` for any other file)."""
-    md = _model_description(fmu)
-    if md.fmiVersion != "2.0" or md.coSimulation is None:
-        raise UserInputError(f"{fmu}: needs to be an FMI 2.0 co-simulation FMU "
-                             f"(fmiVersion {md.fmiVersion}, co-simulation: {md.coSimulation is not None})")
+    md = read_fmu_description(fmu)
     return {v.name: _Var(v.name, v.type, v.causality, v.variability, v.initial,
                          getattr(v, "unit", None) or (v.declaredType.unit if getattr(v, "declaredType", None)
                                                       else None), v.valueReference)
@@ -61,7 +62,7 @@ def _unit_definitions(fmus: Iterable[Path]) -> Dict[str, Dict[str, float]]:
     """Unit name -> SI base-unit exponents (and factor/offset), from the FMUs' UnitDefinitions."""
     units: Dict[str, Dict[str, float]] = {}
     for fmu in fmus:
-        for u in _model_description(fmu).unitDefinitions:
+        for u in read_fmu_description(fmu).unitDefinitions:
             b = u.baseUnit
             if b is None:
                 continue
@@ -133,19 +134,26 @@ def write_ssp(out_file: Path, components: Sequence[Component], connections: Sequ
 
     Every connection end and parameter name is checked against the FMU's
     modelDescription (causality, type): a mismatch raises :class:`UserInputError`.
+    The system is named :func:`identifier` ``(name)``, and ``name`` itself is kept as
+    the description of the SSD and of its system. ``out_file`` may be a new file or an
+    existing regular file (replaced); anything else there (a folder, a device) is refused.
     """
     out_file = Path(out_file)
+    check_out_file(out_file)
     names = [c.name for c in components]
     if len(set(names)) != len(names):
         raise ValueError(f"component names must be unique, got {names}")
+    if any(identifier(n) != n for n in names):
+        raise ValueError(f"component names must be identifiers, got {names}")
     variables = {c.name: model_variables(Path(c.fmu)) for c in components}
     connectors = _connectors(connections, variables)
     for c in components:
         for pname, value in c.parameters.items():
             _check_value(c.name, variables[c.name].get(pname), pname, value)
     root = ET.Element(qname("ssd", "SystemStructureDescription"),
-                      {"version": "1.0", "name": name, "generationTool": "turnout-cosim (orchestrator.cosim.ssp)"})
-    system = ET.SubElement(root, qname("ssd", "System"), {"name": name})
+                      {"version": "1.0", "name": identifier(name), "description": str(name),
+                       "generationTool": "turnout-cosim (orchestrator.cosim.ssp)"})
+    system = ET.SubElement(root, qname("ssd", "System"), {"name": identifier(name), "description": str(name)})
     used_units = _add_components(system, components, connectors, variables)
     _add_connections(system, connections)
     _add_units(root, components, used_units)
@@ -252,6 +260,16 @@ def _add_experiment(root: ET.Element, start_time: float, stop_time: float | None
                       {"baseStepSize": repr(float(step_size))})
 
 
+def check_out_file(out_file: Path) -> None:
+    """Refuse an ``out_file`` that exists and is not a regular file (a folder, a device, a pipe):
+    writing the archive replaces what is there (:class:`UserInputError`)."""
+    if out_file.exists() or out_file.is_symlink():
+        if not out_file.is_file():
+            kind = "a folder" if out_file.is_dir() else "not a regular file"
+            raise UserInputError(f"{out_file}: exists and is {kind}; give a new path or an existing "
+                                 ".ssp file to replace")
+
+
 def _write_archive(out_file: Path, root: ET.Element, components: Sequence[Component],
                    variables: Mapping[str, Mapping[str, _Var]]) -> Path:
     """The zip: the SSD, each FMU and its parameter set; written to a temporary file and
@@ -273,6 +291,10 @@ def _write_archive(out_file: Path, root: ET.Element, components: Sequence[Compon
                 if c.parameters:
                     put(f"resources/{c.name}.ssv",
                         _xml_bytes(_parameter_set(f"{c.name}_parameters", c.parameters, variables[c.name])))
+        umask = os.umask(0)  # read the umask (there is no other portable way) and put it back
+        os.umask(umask)
+        os.chmod(tmp_name, _FILE_MODE & ~umask)  # mkstemp makes 0600; a written file is 0666 & ~umask
+        check_out_file(out_file)  # again: something may have appeared there while writing
         os.replace(tmp_name, out_file)
     except BaseException:
         Path(tmp_name).unlink(missing_ok=True)
@@ -280,4 +302,4 @@ def _write_archive(out_file: Path, root: ET.Element, components: Sequence[Compon
     return out_file
 
 
-__all__ = ["write_ssp", "model_variables"]
+__all__ = ["write_ssp", "model_variables", "identifier", "check_out_file"]
