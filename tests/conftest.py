@@ -93,3 +93,18 @@ def third_party_fmu(tmp_path) -> Path:
     path = tmp_path / "other.fmu"
     path.write_bytes(b"")
     return path
+
+
+@pytest.fixture(scope="session")
+def c_vehicle_fmu(tmp_path_factory) -> Path:
+    """The third-party C quarter-vehicle FMU (tests/c_vehicle.py), built once per session;
+    skipped where no C compiler or no supported platform is."""
+    from c_vehicle import build_c_vehicle_fmu, find_c_compiler, fmu_platform
+
+    if find_c_compiler() is None:
+        pytest.skip("no C compiler (cc or gcc) on PATH: cannot build the C vehicle FMU")
+    try:
+        fmu_platform()
+    except RuntimeError as exc:
+        pytest.skip(str(exc))
+    return build_c_vehicle_fmu(tmp_path_factory.mktemp("c_vehicle"))

@@ -171,20 +171,6 @@ def test_broken_fmu_is_a_one_line_error(tmp_path, content):
         FmuVehicle(fmu, [PortMap(**PORT)], {}, {})
 
 
-@pytest.fixture(scope="module")
-def c_fmu(tmp_path_factory):
-    pytest.importorskip("fmpy")
-    from c_vehicle import build_c_vehicle_fmu, find_c_compiler, fmu_platform
-
-    if find_c_compiler() is None:
-        pytest.skip("no C compiler: cannot build the C vehicle FMU")
-    try:
-        fmu_platform()
-    except RuntimeError as exc:
-        pytest.skip(str(exc))
-    return build_c_vehicle_fmu(tmp_path_factory.mktemp("c_vehicle"))
-
-
 def _ports(**change):
     """Both wheels of the C quarter vehicle; ``change`` = {wheel index: {attr: name}}."""
     ports = [{"x": "axle1.s", "z": f"axle1.z{s}", "vz": f"axle1.vz{s}", "Fz": f"axle1.F{s}",
@@ -200,20 +186,20 @@ def _ports(**change):
     (_ports(**{"0": {"vz": "axle1.FR"}}), ["vehicle.ports[0].vz", "'axle1.FR'", "Real input"]),
     (_ports()[:1], ["vehicle.ports", "2 Real inputs", "map 1", "'axle1.FR'", "one ports entry per wheel"]),
 ])
-def test_ports_are_checked_against_causality_and_count(c_fmu, tmp_path, ports, words):
+def test_ports_are_checked_against_causality_and_count(c_vehicle_fmu, tmp_path, ports, words):
     """Fz on an output crashed the FMU (segfault) or gave "fmi2SetReal returned status 4"; z on a
     parameter or a wheel left out ran with wrong results. Now: refused when the FMU is loaded."""
-    vehicle = {"fmu": str(c_fmu), "speed": 33.333, "ports": ports, "start_values": {"v": 33.333}}
+    vehicle = {"fmu": str(c_vehicle_fmu), "speed": 33.333, "ports": ports, "start_values": {"v": 33.333}}
     rc, _, err = cli(["run", _write_scenario(tmp_path, vehicle), "--dry-run"])
     assert_one_line_exit_2(rc, err, *words)
     from orchestrator.cosim.units import FmuVehicle
     from orchestrator.inputs.specs import PortMap
     with pytest.raises(UserInputError, match=words[0].replace("[", r"\[").replace("]", r"\]")):
-        FmuVehicle(c_fmu, [PortMap(**p) for p in ports], {}, {})
+        FmuVehicle(c_vehicle_fmu, [PortMap(**p) for p in ports], {}, {})
 
 
-def test_correct_ports_pass_and_start_values_are_typed(c_fmu, tmp_path):
-    vehicle = {"fmu": str(c_fmu), "speed": 33.333, "ports": _ports(), "start_values": {"v": 33.333}}
+def test_correct_ports_pass_and_start_values_are_typed(c_vehicle_fmu, tmp_path):
+    vehicle = {"fmu": str(c_vehicle_fmu), "speed": 33.333, "ports": _ports(), "start_values": {"v": 33.333}}
     rc, out, err = cli(["run", _write_scenario(tmp_path, vehicle), "--dry-run"])
     assert rc == 0 and "external vehicle, 2 wheels" in out, err
     vehicle["start_values"] = {"v": "abc"}
@@ -224,8 +210,8 @@ def test_correct_ports_pass_and_start_values_are_typed(c_fmu, tmp_path):
     assert_one_line_exit_2(rc, err, "vehicle.start_values.axle1.zL", "only parameters and inputs")
 
 
-def test_export_ssp_checks_ports_before_building_the_track(c_fmu, tmp_path):
-    vehicle = {"fmu": str(c_fmu), "speed": 33.333, "ports": _ports()[:1], "start_values": {"v": 33.333}}
+def test_export_ssp_checks_ports_before_building_the_track(c_vehicle_fmu, tmp_path):
+    vehicle = {"fmu": str(c_vehicle_fmu), "speed": 33.333, "ports": _ports()[:1], "start_values": {"v": 33.333}}
     rc, _, err = cli(["export-ssp", _write_scenario(tmp_path, vehicle), "--out", tmp_path / "x.ssp"])
     assert_one_line_exit_2(rc, err, "one ports entry per wheel")
     assert not (tmp_path / "x.ssp").exists()

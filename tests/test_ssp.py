@@ -361,19 +361,6 @@ def test_master_jacobi_agrees_with_libcosim(turnout_libcosim, turnout_scenario, 
 # ------------------------------------------------------------------------------------------
 # Third-party vehicle: other names, downward-positive signs
 # ------------------------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def c_vehicle_fmu(tmp_path_factory):
-    from c_vehicle import build_c_vehicle_fmu, find_c_compiler, fmu_platform
-
-    if find_c_compiler() is None:
-        pytest.skip("no C compiler (cc or gcc) on PATH: cannot build the C vehicle FMU")
-    try:
-        fmu_platform()
-    except RuntimeError as exc:
-        pytest.skip(str(exc))
-    return build_c_vehicle_fmu(tmp_path_factory.mktemp("c_vehicle"))
-
-
 def third_party_dict(fmu: Path) -> dict:
     data = small_dict()
     ports = [{"x": "axle1.s", "z": f"axle1.z{s}", "vz": f"axle1.vz{s}", "Fz": f"axle1.F{s}",
