@@ -9,6 +9,7 @@ the runs cost nothing; the recovery tests simulate (``scenarios/measurement``).
 from __future__ import annotations
 
 import csv
+import functools
 import json
 from pathlib import Path
 
@@ -51,10 +52,14 @@ def _bowl_truth_units() -> np.ndarray:
                      CATALOGUE["ballast_void"].to_unit([BOWL_TRUTH["gap3"]] * 6)[0]])
 
 
-def bowl_run(scenario, run_dir: Path) -> dict:
-    """J = floor + sum_j w_j (u_j - u*_j)^2 and two 'channels'; counts its calls per run."""
-    out = next(d for d in run_dir.parents if (d / cal.BASE_FILE).is_file())  # OUT/<stage>[/bNNN]/runs/<run id>
-    calls = out.parent / "calls"
+def bowl_run(scenario, run_dir: Path, calls: Path | None = None) -> dict:
+    """J = floor + sum_j w_j (u_j - u*_j)^2 and two 'channels'; counts its calls per run in ``calls``.
+
+    A worker's run folder is its own temporary one (named after the run id), so the
+    counter's folder is given (:func:`counted`).
+    """
+    if calls is None:
+        raise TypeError("bowl_run needs calls=: use counted(bowl_run, tmp_path)")
     calls.mkdir(exist_ok=True)
     (calls / f"{run_dir.name}.{len(list(calls.glob(run_dir.name + '.*')))}").touch()
     d = _bowl_units(scenario) - _bowl_truth_units()
@@ -62,18 +67,23 @@ def bowl_run(scenario, run_dir: Path) -> dict:
             "nrmse.A1": BOWL_FLOOR + abs(float(d[0])), "nrmse.B1": BOWL_FLOOR + abs(float(d[1]))}
 
 
-def bowl_polish_run(scenario, run_dir: Path) -> dict:
+def bowl_polish_run(scenario, run_dir: Path, calls: Path | None = None) -> dict:
     """As bowl_run, and its residual vector r with |r|^2 = J (what the polish's least squares reads)."""
     d = _bowl_units(scenario) - _bowl_truth_units()
     np.save(run_dir / cal.RESIDUALS_FILE, np.concatenate([np.sqrt(BOWL_WEIGHTS) * d, [np.sqrt(BOWL_FLOOR)]]))
-    return bowl_run(scenario, run_dir)
+    return bowl_run(scenario, run_dir, calls)
 
 
-def failing_bowl_run(scenario, run_dir: Path) -> dict:
+def failing_bowl_run(scenario, run_dir: Path, calls: Path | None = None) -> dict:
     """As bowl_run, but raises for the runs with h1 above its geometric mid-range (about half)."""
     if scenario.track.ballast.stiffness_scale > 1.0:
         raise RuntimeError("diverged")
-    return bowl_run(scenario, run_dir)
+    return bowl_run(scenario, run_dir, calls)
+
+
+def counted(run_fn, tmp: Path):
+    """``run_fn`` counting its calls in ``tmp/calls`` (a picklable partial)."""
+    return functools.partial(run_fn, calls=tmp / "calls")
 
 
 def _calls(tmp: Path) -> dict[str, int]:
@@ -230,7 +240,7 @@ BOWL_PARAMS = f"h1,h2,gap3@{T}"
 def test_pipeline_finds_the_minimum_of_a_known_objective(tmp_path):
     out = tmp_path / "out"
     res = cal.calibrate(MEASUREMENT, None, out, params=BOWL_PARAMS, n1=40, n2=30, seed=1, workers=2,
-                        progress=False, run_fn=bowl_run, polish_fn=bowl_polish_run)
+                        progress=False, run_fn=counted(bowl_run, tmp_path), polish_fn=counted(bowl_polish_run, tmp_path))
     s = json.loads((out / "calibration.json").read_text())
     assert s["runs"] == {"stage1": 40, "stage2_lhs": 30, "stage2_corners": 8, "total": 78, "without_objective": 0,
                          "done": 78, "already_finished": 0}
@@ -271,12 +281,12 @@ def test_resume_does_not_redo_finished_runs(tmp_path):
     out = tmp_path / "out"
     with pytest.raises(cal.CalibrationIncomplete, match="rerun the same command"):
         cal.calibrate(MEASUREMENT, None, out, params=BOWL_PARAMS, n1=30, n2=12, seed=2, workers=2, progress=False,
-                      run_fn=failing_bowl_run, polish_fn=bowl_polish_run)
+                      run_fn=counted(failing_bowl_run, tmp_path), polish_fn=counted(bowl_polish_run, tmp_path))
     first = _calls(tmp_path)
     finished = {p.parent.name for p in (out / "stage1" / "runs").glob("*/result.json")}
     assert 0 < len(finished) < 30 and set(first) == finished  # some runs failed, the others are stored
     res = cal.calibrate(MEASUREMENT, None, out, params=BOWL_PARAMS, n1=30, n2=12, seed=2, workers=2, progress=False,
-                        run_fn=bowl_run, polish_fn=bowl_polish_run)
+                        run_fn=counted(bowl_run, tmp_path), polish_fn=counted(bowl_polish_run, tmp_path))
     assert res.summary["polish"]["done"]
     assert res.stages["stage1"].skipped == len(finished) and res.stages["stage1"].done == 30 - len(finished)
     calls = _calls(tmp_path)
@@ -287,7 +297,7 @@ def test_resume_does_not_redo_finished_runs(tmp_path):
     assert len(ids) == 30 == len(set(ids))  # each run exactly once
     # a third call redoes nothing at all
     again = cal.calibrate(MEASUREMENT, None, out, params=BOWL_PARAMS, n1=30, n2=12, seed=2, workers=2,
-                          progress=False, run_fn=bowl_run, polish_fn=bowl_polish_run)
+                          progress=False, run_fn=counted(bowl_run, tmp_path), polish_fn=counted(bowl_polish_run, tmp_path))
     assert again.stages["stage1"].done == again.stages["stage2"].done == 0
     assert _calls(tmp_path) == calls  # ... the polish's runs included: its iteration replays from disk
     assert np.array_equal(again.u, res.u)
@@ -297,7 +307,7 @@ def test_result_round_trips_through_its_json(tmp_path):
     """calibration.json is CalibrationResult.to_json, and from_json gives back the same result."""
     out = tmp_path / "out"
     res = cal.calibrate(MEASUREMENT, None, out, params=BOWL_PARAMS + ",track.rail_pad.damping=1e4:4e4", n1=12,
-                        n2=6, seed=3, workers=1, progress=False, run_fn=bowl_run, polish=0)
+                        n2=6, seed=3, workers=1, progress=False, run_fn=counted(bowl_run, tmp_path), polish=0)
     text = (out / "calibration.json").read_text()
     assert res.to_json() == text
     back = cal.CalibrationResult.from_json(text, out)

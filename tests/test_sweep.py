@@ -4,16 +4,20 @@ The run functions here are trivial top-level functions (picklable, so spawned
 workers and Dask workers import them from this module): ``y = V * beta`` and a
 call counter per run id. The counter lives outside the run folder, in
 ``<tmp>/calls/<run_id>``, because a run that is redone starts from an empty
-folder.
+folder (and a worker's run folder is its own temporary one): the tests hand the
+run functions that folder with :func:`counted`.
 """
 from __future__ import annotations
 
 import csv
+import functools
 import importlib.util
 import json
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import types
 from pathlib import Path
 
@@ -24,7 +28,7 @@ from orchestrator.cli import main
 from orchestrator.inputs.errors import ScenarioError, UserInputError
 from orchestrator.inputs.scenario import load_scenario
 
-from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO
+from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO, SCENARIOS_DIR
 
 SPEEDS = "2.78,27.78,55.56"  # m/s (10, 100, 200 km/h)
 ANGLES = "0.006,0.012"  # rad (nominal, worn)
@@ -36,44 +40,49 @@ FAIL_SPEED = 27.78  # runs at this speed raise in failing_run
 # --------------------------------------------------------------------------------------
 # Run functions (top level: they cross process boundaries)
 # --------------------------------------------------------------------------------------
-def _side_dir(run_dir: Path) -> Path:
-    """``<tmp>/calls/<run_id>`` for ``run_dir = <tmp>/<out>/runs/<run_id>``: survives a redo."""
-    side = run_dir.parents[2] / "calls" / run_dir.name
+def _side_dir(calls_dir: Path, run_dir: Path) -> Path:
+    """``<tmp>/calls/<run_id>`` (``run_dir`` is named after the run id): survives a redo."""
+    side = Path(calls_dir) / run_dir.name
     side.mkdir(parents=True, exist_ok=True)
     return side
 
 
-def _count_call(run_dir: Path) -> None:
-    counter = _side_dir(run_dir) / "count"
+def _count_call(calls_dir: Path, run_dir: Path) -> None:
+    counter = _side_dir(calls_dir, run_dir) / "count"
     n = int(counter.read_text()) if counter.exists() else 0
     counter.write_text(str(n + 1))
 
 
-def product_run(scenario, run_dir: Path) -> dict:
+def product_run(scenario, run_dir: Path, *, calls_dir: Path) -> dict:
     """``y = V * beta`` [m/s * rad]; writes ``y.txt`` and counts its calls."""
-    _count_call(run_dir)
+    _count_call(calls_dir, run_dir)
     y = scenario.vehicle.speed * scenario.track.impact_angle
     (run_dir / "y.txt").write_text(repr(y))
     return {"y": y, "name": scenario.name, "not_a_scalar": [1.0, 2.0]}
 
 
-def killing_run(scenario, run_dir: Path) -> dict:
+def killing_run(scenario, run_dir: Path, *, calls_dir: Path) -> dict:
     """As product_run, but the KILL run's first attempt writes a partial file and SIGKILLs its worker."""
     if (scenario.vehicle.speed, scenario.track.impact_angle) == (KILL_SPEED, KILL_ANGLE):
-        marker = _side_dir(run_dir) / "killed_once"
+        marker = _side_dir(calls_dir, run_dir) / "killed_once"
         if not marker.exists():
-            _count_call(run_dir)
+            _count_call(calls_dir, run_dir)
             marker.write_text("x")
             (run_dir / "partial.txt").write_text("left by the killed attempt")
             os.kill(os.getpid(), signal.SIGKILL)
-    return product_run(scenario, run_dir)
+    return product_run(scenario, run_dir, calls_dir=calls_dir)
 
 
-def failing_run(scenario, run_dir: Path) -> dict:
+def failing_run(scenario, run_dir: Path, *, calls_dir: Path) -> dict:
     """As product_run, but raises for the runs at FAIL_SPEED."""
     if scenario.vehicle.speed == FAIL_SPEED:
         raise ValueError(f"diverged at\nV = {scenario.vehicle.speed}")
-    return product_run(scenario, run_dir)
+    return product_run(scenario, run_dir, calls_dir=calls_dir)
+
+
+def counted(run_fn, tmp_path: Path):
+    """``run_fn`` counting its calls in ``tmp_path/calls`` (a picklable partial)."""
+    return functools.partial(run_fn, calls_dir=tmp_path / "calls")
 
 
 # --------------------------------------------------------------------------------------
@@ -182,7 +191,8 @@ def test_same_scenario_twice_is_an_error():
 def test_bad_key_or_value_stops_the_sweep_before_any_run(tmp_path, vary, key, words):
     out = tmp_path / "out"
     with pytest.raises(ScenarioError) as info:
-        sweep.run_sweep(DEFAULT_SCENARIO, sweep.grid_from_vary(vary), out, run_fn=product_run, progress=False)
+        sweep.run_sweep(DEFAULT_SCENARIO, sweep.grid_from_vary(vary), out,
+                        run_fn=counted(product_run, tmp_path), progress=False)
     assert info.value.key == key and words in str(info.value)
     assert not out.exists() and not calls(tmp_path)  # nothing ran, nothing written
 
@@ -193,7 +203,8 @@ def test_bad_key_or_value_stops_the_sweep_before_any_run(tmp_path, vary, key, wo
 def test_sweep_writes_one_row_per_run_and_a_rerun_redoes_nothing(tmp_path):
     out = tmp_path / "out"
     variations = sweep.grid_from_vary(GRID)
-    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=product_run, workers=2, progress=False)
+    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, out,
+                          run_fn=counted(product_run, tmp_path), workers=2, progress=False)
     plan = sweep.plan_sweep(DEFAULT_SCENARIO, variations)
     assert (res.done, res.skipped, res.failed) == (6, 0, 0)
     rows = read_table(out / sweep.TABLE_FILE)
@@ -204,7 +215,7 @@ def test_sweep_writes_one_row_per_run_and_a_rerun_redoes_nothing(tmp_path):
         assert float(row["y"]) == float(row["vehicle.speed"]) * float(row["track.crossing.impact_angle"])
         assert (out / "runs" / row["run_id"] / "y.txt").read_text() == row["y"]
     assert [p.name for p in res.plots] == ["sweep_y.png"]  # "name" is a string: no plot
-    again = sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=product_run, progress=False)
+    again = sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=counted(product_run, tmp_path), progress=False)
     assert (again.done, again.skipped) == (0, 6)
     assert read_table(out / sweep.TABLE_FILE) == rows
     assert set(calls(tmp_path).values()) == {1}
@@ -212,9 +223,11 @@ def test_sweep_writes_one_row_per_run_and_a_rerun_redoes_nothing(tmp_path):
 
 def test_extending_the_grid_runs_only_the_new_combinations(tmp_path):
     out = tmp_path / "out"
-    sweep.run_sweep(DEFAULT_SCENARIO, sweep.grid_from_vary(GRID), out, run_fn=product_run, progress=False)
+    sweep.run_sweep(DEFAULT_SCENARIO, sweep.grid_from_vary(GRID), out,
+                    run_fn=counted(product_run, tmp_path), progress=False)
     more = [f"vehicle.speed=1.0,{SPEEDS}", f"track.crossing.impact_angle={ANGLES}"]
-    res = sweep.run_sweep(DEFAULT_SCENARIO, sweep.grid_from_vary(more), out, run_fn=product_run, progress=False)
+    res = sweep.run_sweep(DEFAULT_SCENARIO, sweep.grid_from_vary(more), out,
+                          run_fn=counted(product_run, tmp_path), progress=False)
     assert (res.done, res.skipped) == (2, 6)
     assert [r["vehicle.speed"] for r in res.rows] == [1.0, 1.0, 2.78, 2.78, 27.78, 27.78, 55.56, 55.56]
     assert [r["index"] for r in res.rows] == list(range(8))
@@ -223,7 +236,7 @@ def test_extending_the_grid_runs_only_the_new_combinations(tmp_path):
 def test_failed_run_is_reported_and_retried_the_next_time(tmp_path):
     out = tmp_path / "out"
     variations = sweep.grid_from_vary(GRID)
-    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=failing_run, progress=False)
+    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=counted(failing_run, tmp_path), progress=False)
     assert (res.done, res.skipped, res.failed) == (4, 0, 2)
     bad = [r.run_id for r in sweep.plan_sweep(DEFAULT_SCENARIO, variations).runs
            if r.values["vehicle.speed"] == FAIL_SPEED]
@@ -231,7 +244,7 @@ def test_failed_run_is_reported_and_retried_the_next_time(tmp_path):
     assert res.errors[bad[0]] == "ValueError: diverged at V = 27.78"
     assert "rerun the same command" in res.summary()
     assert len(read_table(out / sweep.TABLE_FILE)) == 4
-    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=product_run, progress=False)
+    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=counted(product_run, tmp_path), progress=False)
     assert (res.done, res.skipped, res.failed) == (2, 4, 0)
 
 
@@ -247,7 +260,8 @@ def test_killed_worker_loses_nothing_and_the_rerun_does_only_the_missing_runs(tm
     plan = sweep.plan_sweep(DEFAULT_SCENARIO, variations)
     killed = plan.runs[-1].run_id
     with pytest.raises(sweep.SweepIncomplete) as info:
-        sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=killing_run, workers=2, progress=False)
+        sweep.run_sweep(DEFAULT_SCENARIO, variations, out,
+                        run_fn=counted(killing_run, tmp_path), workers=2, progress=False)
     message = str(info.value)
     assert "worker process died" in message and killed in message
     assert "run the same command again" in message and "\n" not in message
@@ -259,7 +273,8 @@ def test_killed_worker_loses_nothing_and_the_rerun_does_only_the_missing_runs(tm
     assert set(info.value.result.unfinished) == {r.run_id for r in plan.runs} - first
     calls_first = calls(tmp_path)
 
-    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, out, run_fn=killing_run, workers=2, progress=False)
+    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, out,
+                          run_fn=counted(killing_run, tmp_path), workers=2, progress=False)
     assert (res.done, res.skipped, res.failed) == (len(plan.runs) - len(first), len(first), 0)
     ids = [r["run_id"] for r in read_table(out / sweep.TABLE_FILE)]
     assert ids == [r.run_id for r in plan.runs]  # none lost, none twice, grid order
@@ -285,8 +300,9 @@ def dask_cluster():
 
 def test_dask_cluster_gives_the_same_table_as_local_processes(tmp_path, dask_cluster):
     variations = sweep.grid_from_vary(GRID)
-    local = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "local", run_fn=product_run, progress=False)
-    dask = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "dask", run_fn=product_run,
+    local = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "local",
+                            run_fn=counted(product_run, tmp_path), progress=False)
+    dask = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "dask", run_fn=counted(product_run, tmp_path),
                            scheduler=dask_cluster.scheduler_address, progress=False)
     assert (local.done, dask.done, dask.failed) == (6, 6, 0)
     assert (tmp_path / "dask" / sweep.TABLE_FILE).read_text() == (tmp_path / "local" / sweep.TABLE_FILE).read_text()
@@ -295,7 +311,7 @@ def test_dask_cluster_gives_the_same_table_as_local_processes(tmp_path, dask_clu
 def test_dask_reschedules_a_run_whose_worker_died(tmp_path, dask_cluster):
     """Dask retries the task of a dead worker itself: one call, every run once in the table."""
     variations = sweep.grid_from_vary(GRID)
-    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "out", run_fn=killing_run,
+    res = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "out", run_fn=counted(killing_run, tmp_path),
                           scheduler=dask_cluster.scheduler_address, progress=False)
     plan = sweep.plan_sweep(DEFAULT_SCENARIO, variations)
     assert (res.done, res.failed) == (6, 0)
@@ -308,7 +324,8 @@ def test_unreachable_scheduler_is_a_user_error(tmp_path, monkeypatch):
     pytest.importorskip("distributed")
     monkeypatch.setattr(sweep, "DASK_CONNECT_TIMEOUT", "1s")
     with pytest.raises(UserInputError, match="tcp://127.0.0.1:1"):
-        sweep.run_sweep(DEFAULT_SCENARIO, [{"vehicle.speed": 3.0}], tmp_path / "o", run_fn=product_run,
+        sweep.run_sweep(DEFAULT_SCENARIO, [{"vehicle.speed": 3.0}], tmp_path / "o",
+                        run_fn=counted(product_run, tmp_path),
                         scheduler="tcp://127.0.0.1:1", progress=False)
 
 
@@ -415,3 +432,50 @@ def test_real_sweep_through_the_cli_matches_single_runs(tmp_path, capsys):
         record = json.loads((out / "runs" / row["run_id"] / sweep.RESULT_FILE).read_text())
         assert record["run_id"] == row["run_id"] and record["index"] == int(row["index"])
     assert (out / "sweep_max_Fz.png").exists()
+
+
+# --------------------------------------------------------------------------------------
+# Runs by value
+# --------------------------------------------------------------------------------------
+def layout_run(scenario, run_dir: Path) -> dict:
+    """Reports the sensor layout file the worker's scenario names, and writes a file into a sub-folder."""
+    (run_dir / "sub").mkdir()
+    (run_dir / "sub" / "layout_copy.yaml").write_bytes(Path(scenario.sensors).read_bytes())
+    return {"sensors": scenario.sensors, "speed": scenario.vehicle.speed}
+
+
+def test_a_run_travels_by_value_and_comes_back_by_value(tmp_path, monkeypatch):
+    """A run's job holds the scenario and its layout file by value: it runs after the client's files are gone,
+    in the worker's temporary space, and returns what the run function wrote."""
+    from orchestrator.cosim.portable import FILES_DIR, file_keys
+    from orchestrator.sweeps.store import RunJob, SweepStore, execute_run
+
+    client = tmp_path / "client"
+    (client / "sensors").mkdir(parents=True)
+    measurement = SCENARIOS_DIR / "measurement" / "crossing_quarter_120.yaml"
+    layout = SCENARIOS_DIR / "sensors" / "in2track_like.yaml"
+    (client / "sensors" / "mine.yaml").write_bytes(layout.read_bytes())
+    (client / "scen.yaml").write_text(measurement.read_text(encoding="utf-8").replace(
+        "sensors: ../sensors/in2track_like.yaml", "sensors: sensors/mine.yaml"), encoding="utf-8")
+    plan = sweep.plan_sweep(client / "scen.yaml", [{"vehicle.speed": 30.0}])
+    assert [k for k, _ in file_keys(plan.runs[0].raw)] == [("sensors",)]  # vehicle.fmu: quarter is a keyword
+    job = RunJob.of(plan.runs[0], str(client / "scen.yaml"))
+    shutil.rmtree(client)  # the worker is elsewhere: nothing of the client's is there
+
+    worker_tmp = tmp_path / "worker-tmp"
+    worker_tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(worker_tmp))
+    output = execute_run(job, layout_run)
+    local = Path(output.record["result"]["sensors"])
+    assert local.parent.parent == worker_tmp / FILES_DIR and local.read_bytes() == layout.read_bytes()
+    assert output.files == {"sub/layout_copy.yaml": layout.read_bytes()}
+    assert [p.name for p in worker_tmp.iterdir()] == [FILES_DIR]  # the run folder is gone
+
+    store = SweepStore.open(tmp_path / "out")
+    (store.run_dir(job.run_id) / "stale.txt").parent.mkdir(parents=True)
+    (store.run_dir(job.run_id) / "stale.txt").write_text("of a killed attempt")
+    store.save(output)
+    assert sorted(p.relative_to(store.run_dir(job.run_id)).as_posix()
+                  for p in store.run_dir(job.run_id).rglob("*") if p.is_file()) == ["result.json",
+                                                                                   "sub/layout_copy.yaml"]
+    assert store.record(job.run_id)["result"]["speed"] == 30.0

@@ -3,20 +3,20 @@
 :func:`simulate_sensors` runs the co-simulation in-process (the same model objects as
 the FMUs; :mod:`orchestrator.cosim.master`), records the track states at the output step and
 reads the layout's sensors from them (:mod:`track.sensors`). :func:`sensors_job` is the
-top-level (picklable) form that diagnosis and calibration send to worker processes: it
-takes the scenario as a validated raw mapping.
+top-level (picklable) form that diagnosis sends to worker processes: it takes the
+scenario by value (:class:`orchestrator.cosim.portable.PortableScenario`).
 """
 from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from track.sensors import compile_sensors, sensor_signals
 
-from orchestrator.inputs.sensor_layout import SensorLayout, layout_of, load_layout, resolve
+from orchestrator.cosim.portable import PortableScenario
+from orchestrator.inputs.sensor_layout import SensorLayout, layout_of, resolve
 
 @dataclass
 class SensorRun:
@@ -71,13 +71,14 @@ def variant_for_speed(raw: dict, speed: float) -> dict:
     return raw
 
 
-def sensors_job(raw: dict, base_dir: str, layout_path: str | None, reconstruct: bool = False) -> SensorRun:
-    """:func:`simulate_sensors` of a raw scenario mapping (for worker processes)."""
-    from orchestrator.inputs.scenario import scenario_from_dict
+def sensors_job(scenario: PortableScenario, reconstruct: bool = False) -> SensorRun:
+    """:func:`simulate_sensors` of a scenario sent by value (what diagnosis runs in its workers).
 
-    scenario = scenario_from_dict(raw, source="<variant>", base_dir=Path(base_dir))
-    layout = load_layout(layout_path) if layout_path else None
-    return simulate_sensors(scenario, layout, reconstruct=reconstruct)
+    The scenario comes with its files (its sensor layout, a vehicle FMU:
+    :class:`orchestrator.cosim.portable.PortableScenario`) and the signals go back by value,
+    so the worker needs no access to the client's files.
+    """
+    return simulate_sensors(scenario.scenario(), reconstruct=reconstruct)
 
 
 __all__ = ["variant_for_speed", "SensorRun", "simulate_sensors", "sensors_job"]

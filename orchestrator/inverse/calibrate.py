@@ -206,7 +206,7 @@ class CalibrationResult:
 
 def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, out_dir: str | os.PathLike, *,
               params: str | Sequence[Parameter] | None = None, n1: int = 500, n2: int = 500, seed: int = 0,
-              workers: int = 2, scheduler: str | None = None, progress: bool = True,
+              workers: int | None = None, scheduler: str | None = None, progress: bool = True,
               run_fn: Callable | None = None, transforms: Sequence[str] = TRANSFORMS,
               polish: int = POLISH_MAX_NFEV, polish_fn: Callable | None = None) -> CalibrationResult:
     """Calibrate the parameters of a scenario against a measurement (module docstring).
@@ -225,8 +225,8 @@ def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, 
         Runs of the first and the second Latin hypercube.
     seed : int
         Seed of the designs, the CV folds and the random starts.
-    workers : int
-        Local worker processes (ignored with ``scheduler``).
+    workers : int, optional
+        Local worker processes (default: one per core; ignored with ``scheduler``).
     scheduler : str, optional
         Dask scheduler address.
     progress : bool

@@ -3,12 +3,13 @@
 Part of :mod:`orchestrator.inverse.calibrate` (its module docstring describes the
 pipeline and the output folder). Every run of the calibration goes through
 :meth:`Runs.sweep` (:func:`orchestrator.sweeps.sweep.run_sweep`: resumable, local
-processes or Dask); :func:`objective_run` is what a run computes (J and each channel's
+processes or Dask, the scenario and the measurement sent by value); :func:`objective_run` is what a run computes (J and each channel's
 nRMSE); :func:`polish` is stage 7, least squares on real runs.
 """
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import itertools
 import json
@@ -23,7 +24,7 @@ from orchestrator.inputs.errors import one_line
 from orchestrator.inverse.calibration_params import Parameter, values_at, variation
 from orchestrator.inverse.surrogate import OBJECTIVE
 
-__all__ = ["CalibrationIncomplete", "Runs", "objective_run", "snapshot", "polish", "finite"]
+__all__ = ["CalibrationIncomplete", "Runs", "objective_run", "measured_by_value", "snapshot", "polish", "finite"]
 
 CHANNEL_PREFIX = "nrmse."  # run-function scalars "nrmse.<sensor id>": channel surrogates
 SIGNALS_FILE = "signals.npz"  # the confirmation runs' sensor signals
@@ -44,18 +45,40 @@ class CalibrationIncomplete(RuntimeError):
 _TARGETS: dict[tuple, Any] = {}  # per worker process: (measured file, layout file) -> Target
 
 
-def _target(measured: str, scenario):
-    """The worker's :class:`~orchestrator.inverse.objective.Target` of a measurement and the scenario's layout."""
+def _target(measured, scenario):
+    """The worker's :class:`~orchestrator.inverse.objective.Target` of a measurement and the scenario's layout.
+
+    ``measured`` is a :class:`~orchestrator.cosim.portable.FileValue` (recreated in the
+    worker's temporary space, once per content) or a path the worker can read.
+    """
+    from orchestrator.cosim.portable import FileValue
     from orchestrator.inputs.sensor_layout import layout_of
     from orchestrator.inverse.objective import Target
 
-    key = (measured, scenario.sensors)
+    path = measured.local_path() if isinstance(measured, FileValue) else measured
+    key = (str(path), scenario.sensors)
     if key not in _TARGETS:
-        _TARGETS[key] = Target.read(measured, layout_of(scenario))
+        _TARGETS[key] = Target.read(path, layout_of(scenario))
     return _TARGETS[key]
 
 
-def objective_run(scenario, run_dir: Path, *, measured: str, shift: float, save_signals: bool = False,
+def measured_by_value(run_fn: Callable) -> Callable:
+    """``run_fn`` with the measurement sent by value when it is :func:`objective_run` given a path.
+
+    The calibration's run functions are partials of :func:`objective_run` with
+    ``measured=`` a path on the client; a worker on another machine cannot read it, so
+    the file's content goes with the function instead
+    (:class:`~orchestrator.cosim.portable.FileValue`). Any other run function is returned as is.
+    """
+    from orchestrator.cosim.portable import FileValue
+
+    if isinstance(run_fn, functools.partial) and run_fn.func is objective_run and \
+            isinstance(run_fn.keywords.get("measured"), (str, Path)):
+        return functools.partial(run_fn, measured=FileValue.read(run_fn.keywords["measured"]))
+    return run_fn
+
+
+def objective_run(scenario, run_dir: Path, *, measured, shift: float, save_signals: bool = False,
                   save_residuals: bool = False) -> dict:
     """Simulate ``scenario`` and compare it with a measurement: J and each channel's nRMSE.
 
@@ -67,8 +90,9 @@ def objective_run(scenario, run_dir: Path, *, measured: str, shift: float, save_
     scenario : Scenario
     run_dir : Path
         The run's folder (``signals.npz`` goes there with ``save_signals``).
-    measured : str
-        The measurement file (CSV, HDF5 or MAT; :func:`orchestrator.inputs.measured.read_measured`).
+    measured : str or FileValue
+        The measurement file (CSV, HDF5 or MAT; :func:`orchestrator.inputs.measured.read_measured`):
+        its path, or its content (:func:`measured_by_value`: what the calibration sends).
     shift : float
         Time alignment [s] fixed once for all runs (:meth:`orchestrator.inverse.objective.Target.align_to`).
     save_signals : bool
@@ -156,7 +180,7 @@ class Runs:
     snapshot: Path
     raw: dict
     params: list[Parameter]
-    workers: int
+    workers: int | None
     scheduler: str | None
     progress: bool
 
@@ -164,12 +188,13 @@ class Runs:
               executor=None):
         """:func:`orchestrator.sweeps.sweep.run_sweep` of ``variations`` into ``out``; returns its SweepResult.
 
+        The runs and the measurement go to the workers by value (:func:`measured_by_value`).
         Unfinished or failed runs raise :class:`CalibrationIncomplete` (``what`` names the stage).
         """
         from orchestrator.sweeps.sweep import SweepIncomplete, run_sweep
 
         try:
-            res = run_sweep(self.snapshot, variations, out, run_fn=run_fn, workers=self.workers,
+            res = run_sweep(self.snapshot, variations, out, run_fn=measured_by_value(run_fn), workers=self.workers,
                             scheduler=self.scheduler, progress=progress, executor=executor)
         except SweepIncomplete as exc:
             raise CalibrationIncomplete(f"calibration {what}: {exc}") from None

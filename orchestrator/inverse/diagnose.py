@@ -457,7 +457,7 @@ def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: C
     write_report(inp.out_dir, result, inp.target, before, after, inp.layout)
 
 
-def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 2, scheduler: str | None = None,
+def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | None = None, scheduler: str | None = None,
              progress: bool = True) -> Diagnosis:
     """Run the diagnosis (module docstring); write diagnosis.json, extended.yaml, report.md, plots.
 
@@ -473,8 +473,8 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
     out_dir : path-like
     validate : sequence of str
         Further passages as ``FILE@SPEED`` (speed in m/s): compared before/after, not fitted.
-    workers : int
-        Local worker processes.
+    workers : int, optional
+        Local worker processes (default: one per core).
     scheduler : str, optional
         Dask scheduler address.
     progress : bool
@@ -493,7 +493,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int = 
     executor = make_executor(workers, scheduler)
     bar = tqdm(total=1 + sum(len(xs) - 1 for xs, _ in inp.axes.values()), desc="diagnose", unit="run",
                disable=not progress)
-    pool = Pool(executor, str(Path(scenario_path).resolve().parent), inp.scenario.sensors, bar=bar)
+    pool = Pool(executor, str(scenario_path), bar=bar)
     try:
         base, baseline = _baseline(pool, inp)
         dense = _search(inp, _screen(pool, inp, base))

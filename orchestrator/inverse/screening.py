@@ -50,11 +50,27 @@ class Evaluated:
 
 @dataclass
 class Pool:
-    """Runs of scenario variants on an executor (local processes or Dask)."""
+    """Runs of scenario variants on an executor (local processes or Dask).
+
+    Each run goes to its worker by value (the raw scenario and the files it names:
+    :class:`orchestrator.cosim.portable.PortableScenario`) and its signals come back by
+    value, so a worker needs no access to the client's files.
+
+    Attributes
+    ----------
+    executor : concurrent.futures.Executor
+    source : str
+        The scenario's file on the client (named in a worker's error messages).
+    runs : int
+        Runs done so far.
+    wall : float
+        Wall time spent waiting for them [s].
+    bar : tqdm or None
+        Progress bar, advanced by one per run.
+    """
 
     executor: object
-    base_dir: str
-    layout_path: str | None
+    source: str = "<variant>"
     runs: int = 0
     wall: float = 0.0
     bar: object = None
@@ -65,11 +81,12 @@ class Pool:
             self.bar.total += n
 
     def map(self, raws: list[dict]) -> list:
-        """The runs of ``raws`` (raw scenario dicts), in their order."""
+        """The runs of ``raws`` (validated raw scenario dicts, file paths absolute), in their order."""
+        from orchestrator.cosim.portable import PortableScenario
         from orchestrator.cosim.sensing import sensors_job
 
         t0 = time.perf_counter()
-        futures = [self.executor.submit(sensors_job, raw, self.base_dir, self.layout_path) for raw in raws]
+        futures = [self.executor.submit(sensors_job, PortableScenario.of(raw, self.source)) for raw in raws]
         out = []
         for f in futures:
             run = f.result()

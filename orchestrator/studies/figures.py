@@ -263,7 +263,7 @@ SEED000_MEASURED = "measurement/crossing_quarter_120.yaml"
 SEED000_VOID = (0.0, 0.4e-3, 0.9e-3, 0.9e-3, 0.4e-3, 0.0)   # m: DESIGN.md §4.2's example void profile
 
 
-def seed000_pressure(out_dir: Path, workers: int = 2, scheduler: str | None = None,
+def seed000_pressure(out_dir: Path, workers: int | None = None, scheduler: str | None = None,
                      progress: bool = True) -> list[Path]:
     """Seed 000's measured vs nominal vs calibrated ballast pressure (module docstring)."""
     from track.model import reference_point
@@ -352,7 +352,7 @@ def _plot_pressure(cells: list, peak: dict[str, list], target, lines: dict[str, 
     return path
 
 
-def make_figures(out_dir: Path, study: str = "all", workers: int = 2, scheduler: str | None = None,
+def make_figures(out_dir: Path, study: str = "all", workers: int | None = None, scheduler: str | None = None,
                  progress: bool = True, speeds_kmh=None) -> list[Path]:
     """Run the studies (resumable) and write the figures into ``out_dir``.
 

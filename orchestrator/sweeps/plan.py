@@ -18,7 +18,7 @@ import hashlib
 import itertools
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -149,12 +149,16 @@ class Run:
     values : dict
         Varied key -> the value the run uses (from its validated scenario, so a
         key a list item leaves out shows the base value).
+    raw : dict
+        The run's validated raw scenario (file paths absolute on the client): what its
+        worker gets, by value (:class:`orchestrator.cosim.portable.PortableScenario`).
     """
 
     index: int
     run_id: str
     overrides: tuple[str, ...]
     values: dict
+    raw: dict = field(repr=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -197,10 +201,9 @@ def plan_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, A
     for index, variation in enumerate(variations):
         items = sorted((_override_key(k, f"run {index}"), v) for k, v in variation.items())
         overrides = tuple(f"{k}={_value_text(v)}" for k, v in items)
-        # The same call a worker makes (load_scenario = read_yaml + scenario_from_dict).
         raw = scenario_from_dict(data, source=source, overrides=overrides, base_dir=folder).raw
         run_id = RUN_ID_PREFIX + _digest(raw)[:RUN_ID_CHARS]
-        run = Run(index, run_id, overrides, {k: keypath.get(raw, k) for k in varied})
+        run = Run(index, run_id, overrides, {k: keypath.get(raw, k) for k in varied}, raw)
         if run_id in seen:
             first = seen[run_id]
             raise UserInputError(f"run {index} ({', '.join(overrides) or 'no overrides'}) is the same scenario as "

@@ -12,10 +12,16 @@ Run ids come from :func:`orchestrator.sweeps.plan.plan_sweep`. On (re)start
 finished runs are skipped; any other run is done from scratch (its folder is
 emptied first, so no file of a killed attempt survives). ``result.json`` and
 ``sweep.csv`` are written atomically (temporary file in the same folder, then
-``os.replace``), so a killed worker or a killed sweep never leaves half a file behind.
+``os.replace``), so a killed sweep never leaves half a file behind.
 
-Workers receive only strings (base path, override texts, run folder) and load the
-scenario themselves (:func:`execute_run`), so the local and the Dask path run
+Only the client touches the store. A worker gets a :class:`RunJob`: the run's scenario
+by value (raw scenario and the files it names,
+:class:`orchestrator.cosim.portable.PortableScenario`) and its id, never a path of the
+client (its working folder and file system may be another machine's). It runs in a
+fresh folder of its own temporary space (:func:`execute_run`) and returns a
+:class:`RunOutput`: the record (the returned scalars) and the bytes of every file the
+run function wrote. The client writes them into ``OUT/runs/<run_id>/``,
+``result.json`` last (:meth:`SweepStore.save`). The local and the Dask path run
 identical code.
 """
 from __future__ import annotations
@@ -24,16 +30,20 @@ import json
 import numbers
 import os
 import shutil
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+from orchestrator.cosim.portable import PortableScenario
 from orchestrator.sweeps.plan import Run, SweepPlan
 
-__all__ = ["SweepStore", "execute_run", "read_record", "table_rows", "cell_text", "write_table"]
+__all__ = ["SweepStore", "RunJob", "RunOutput", "execute_run", "read_record", "table_rows", "cell_text",
+           "write_table"]
 
 RUNS_DIR = "runs"  # OUT/runs/<run_id>/: one folder per run
 RESULT_FILE = "result.json"  # its presence marks a finished run
+WORK_PREFIX = "turnout-run-"  # a worker's run folder: <its temp folder>/turnout-run-XXXX/<run_id>
 TABLE_FILE = "sweep.csv"
 INDEX_COLUMN, ID_COLUMN = "index", "run_id"  # the first two columns of sweep.csv
 
@@ -84,6 +94,25 @@ class SweepStore:
                 records[run.run_id] = record
         return records
 
+    def save(self, output: RunOutput) -> dict:
+        """Write a finished run a worker returned into ``OUT/runs/<run_id>/``; returns its record.
+
+        The folder is emptied first (files of a killed attempt); the run's files are
+        written, then ``result.json`` (atomically, last: a sweep killed in between leaves
+        the run unfinished, to be redone).
+        """
+        run_id = output.record["run_id"]
+        folder = self.run_dir(run_id)
+        if folder.exists():
+            shutil.rmtree(folder)
+        folder.mkdir(parents=True)
+        for name, data in output.files.items():
+            path = folder / name
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
+        _write_atomic(folder / RESULT_FILE, json.dumps(output.record, indent=1))
+        return output.record
+
     def write_table(self, plan: SweepPlan, records: Mapping[str, dict]) -> list[dict]:
         """Write ``OUT/sweep.csv`` from the finished runs' ``records``; returns its rows (:func:`table_rows`)."""
         rows = table_rows(plan, records)
@@ -92,7 +121,7 @@ class SweepStore:
 
 
 # --------------------------------------------------------------------------------------
-# One run (executed in a worker)
+# One run (executed in a worker: values in, values out)
 # --------------------------------------------------------------------------------------
 def _scalar(value: Any) -> Any:
     """A JSON scalar for ``value`` (numpy scalars included), or ``None`` for anything else."""
@@ -117,25 +146,67 @@ def _write_atomic(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def execute_run(base_path: str, overrides: Sequence[str], run_dir: str, run_id: str, index: int,
-                run_fn: Callable | None) -> dict:
-    """Do one run in a worker: fresh run folder, scenario, ``run_fn``, ``result.json``; returns the record."""
-    from orchestrator.inputs.scenario import load_scenario
+@dataclass(frozen=True)
+class RunJob:
+    """What a worker gets for one run: nothing but values (module docstring).
 
+    Attributes
+    ----------
+    scenario : PortableScenario
+        The run's scenario and the files it names.
+    run_id : str
+    index : int
+        Its position in the sweep.
+    overrides : tuple of str
+        Its ``key.path=value`` texts (kept in its record).
+    """
+
+    scenario: PortableScenario
+    run_id: str
+    index: int
+    overrides: tuple
+
+    @classmethod
+    def of(cls, run: Run, source: str) -> RunJob:
+        """The job of ``run`` of a sweep of the scenario file ``source`` (its files are read now)."""
+        return cls(PortableScenario.of(run.raw, source), run.run_id, run.index, tuple(run.overrides))
+
+
+@dataclass(frozen=True)
+class RunOutput:
+    """What a worker returns for one finished run.
+
+    Attributes
+    ----------
+    record : dict
+        ``run_id``, ``index``, ``overrides`` and ``result`` (name -> JSON scalar): ``result.json``.
+    files : dict
+        Path relative to the run folder (POSIX text) -> bytes of each file the run function wrote.
+    """
+
+    record: dict
+    files: dict
+
+
+def execute_run(job: RunJob, run_fn: Callable | None) -> RunOutput:
+    """Do one run in a worker, in a fresh folder of its temporary space; returns the record and the files.
+
+    ``run_fn(scenario, run_dir)`` gets that folder; everything it writes there comes back
+    in the :class:`RunOutput` and the folder is removed.
+    """
     if run_fn is None:
         from orchestrator.sweeps.study import run_case as run_fn  # imported here: tests and other studies pass their own
-    folder = Path(run_dir)
-    if folder.exists():  # files of an attempt that was killed: start from scratch
-        shutil.rmtree(folder)
-    folder.mkdir(parents=True)
-    scenario = load_scenario(base_path, overrides=list(overrides))
-    returned = run_fn(scenario, folder)
-    if not isinstance(returned, Mapping):
-        raise TypeError(f"the run function must return a mapping name -> scalar, got {type(returned).__name__}")
+    scenario = job.scenario.scenario()
+    with tempfile.TemporaryDirectory(prefix=WORK_PREFIX) as work:
+        folder = Path(work) / job.run_id
+        folder.mkdir()
+        returned = run_fn(scenario, folder)
+        if not isinstance(returned, Mapping):
+            raise TypeError(f"the run function must return a mapping name -> scalar, got {type(returned).__name__}")
+        files = {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
     scalars = {str(k): s for k, v in returned.items() if (s := _scalar(v)) is not None}
-    record = {"run_id": run_id, "index": index, "overrides": list(overrides), "result": scalars}
-    _write_atomic(folder / RESULT_FILE, json.dumps(record, indent=1))
-    return record
+    record = {"run_id": job.run_id, "index": job.index, "overrides": list(job.overrides), "result": scalars}
+    return RunOutput(record, files)
 
 
 def read_record(path: Path) -> dict | None:

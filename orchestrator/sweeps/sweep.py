@@ -12,7 +12,9 @@ This module holds :func:`run_sweep`, which ties them together, its result
 :func:`run_sweep` in stages: plan and check everything (nothing runs on a bad key,
 value or option), read the runs already finished, run the missing ones (the table is
 rewritten after each), then write the table and the plots and sort out what did not
-finish.
+finish. The runs travel to the workers by value and come back by value
+(:mod:`orchestrator.sweeps.store`): a Dask cluster on other machines needs no shared
+file system, and only this process writes ``OUT``.
 """
 from __future__ import annotations
 
@@ -28,11 +30,12 @@ from typing import Any, Callable, Mapping, Sequence
 
 from orchestrator.inputs.errors import UserInputError
 # DASK_CONNECT_TIMEOUT is read here at each call, so that it can be set on this module (the tests shorten it).
-from orchestrator.sweeps.executors import DASK_CONNECT_TIMEOUT, check_workers, lost_worker, make_executor
+from orchestrator.sweeps.executors import (DASK_CONNECT_TIMEOUT, check_workers, default_workers, lost_worker,
+                                          make_executor)
 # Re-exported: the sweep's public face (the CLI and the tests read them here).
 from orchestrator.sweeps.plan import Run, SweepPlan, expand_grid, grid_from_vary, list_from_file, plan_sweep
-from orchestrator.sweeps.store import (ID_COLUMN, INDEX_COLUMN, RESULT_FILE, RUNS_DIR, TABLE_FILE, SweepStore,
-                                       cell_text, execute_run, write_table)
+from orchestrator.sweeps.store import (ID_COLUMN, INDEX_COLUMN, RESULT_FILE, RUNS_DIR, TABLE_FILE, RunJob,
+                                       SweepStore, cell_text, execute_run, write_table)
 
 __all__ = [
     "Run",
@@ -209,7 +212,7 @@ class _Options:
     """How :func:`run_sweep` runs: its arguments ``run_fn`` .. ``executor``."""
 
     run_fn: Callable | None
-    workers: int
+    workers: int | None
     scheduler: str | None
     progress: bool
     executor: cf.Executor | None
@@ -225,7 +228,7 @@ class _Outcome:
 
 
 def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, Any]], out_dir: str | os.PathLike,
-              run_fn: Callable | None = None, workers: int = 2, scheduler: str | None = None,
+              run_fn: Callable | None = None, workers: int | None = None, scheduler: str | None = None,
               progress: bool = True, executor: cf.Executor | None = None) -> SweepResult:
     """Run (or resume) a sweep; write ``OUT/runs/*``, ``OUT/sweep.csv`` and the plots.
 
@@ -240,9 +243,12 @@ def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, An
     run_fn : callable, optional
         ``run_fn(scenario, run_dir) -> dict[str, float]``, a top-level (picklable)
         function; default :func:`orchestrator.sweeps.study.run_case`. Non-scalar
-        values it returns are left out of the table (write arrays to ``run_dir``).
-    workers : int
-        Local worker processes (default 2).
+        values it returns are left out of the table (write arrays to ``run_dir``:
+        a fresh folder in the worker's temporary space, whose files are sent back and
+        written to ``OUT/runs/<run_id>/`` by this process).
+    workers : int, optional
+        Local worker processes (default: one per core,
+        :func:`orchestrator.sweeps.workers.default_workers`).
     scheduler : str, optional
         A Dask scheduler address; the runs go to that cluster instead.
     progress : bool
@@ -281,7 +287,7 @@ def run_sweep(base_path: str | os.PathLike, variations: Sequence[Mapping[str, An
 
 def _check_options(options: _Options) -> None:
     """Raise :class:`UserInputError` for a bad ``workers`` or a ``run_fn`` that cannot be pickled."""
-    if options.scheduler is None and options.executor is None:
+    if options.scheduler is None and options.executor is None and options.workers is not None:
         check_workers(options.workers)
     if options.run_fn is not None:
         try:
@@ -303,13 +309,13 @@ def _run_missing(plan: SweepPlan, todo: Sequence[Run], store: SweepStore, outcom
     executor, own = options.executor, options.executor is None
     if own:
         # No more local processes than runs: each spawned worker pays the imports.
-        workers = options.workers if options.scheduler else min(options.workers, len(todo))
+        workers = options.workers if options.scheduler else min(options.workers or default_workers(), len(todo))
         executor = make_executor(workers, options.scheduler, connect_timeout=DASK_CONNECT_TIMEOUT)
     bar = tqdm(total=len(todo), desc="sweep", unit="run", disable=not options.progress)
     futures: dict[cf.Future, Run] = {}
     clean = False
     try:
-        submitted = _submit(executor, plan.base_path, todo, store, options.run_fn, futures)
+        submitted = _submit(executor, plan.base_path, todo, options.run_fn, futures)
         if submitted < len(todo):  # a worker died while the runs were being handed out
             outcome.lost.extend(r.run_id for r in todo[submitted:])
             bar.update(len(todo) - submitted)
@@ -324,16 +330,16 @@ def _run_missing(plan: SweepPlan, todo: Sequence[Run], store: SweepStore, outcom
                 future.cancel()
 
 
-def _submit(executor: cf.Executor, base_path: Path, todo: Sequence[Run], store: SweepStore,
-            run_fn: Callable | None, futures: dict[cf.Future, Run]) -> int:
-    """Hand ``todo`` to ``executor``, adding each future to ``futures``; returns how many were handed out.
+def _submit(executor: cf.Executor, base_path: Path, todo: Sequence[Run], run_fn: Callable | None,
+            futures: dict[cf.Future, Run]) -> int:
+    """Hand ``todo`` to ``executor`` by value (:class:`~orchestrator.sweeps.store.RunJob`), adding each
+    future to ``futures``; returns how many were handed out.
 
     Fewer than ``len(todo)`` when the executor broke (a worker died) on the way.
     """
     for k, run in enumerate(todo):
         try:
-            futures[executor.submit(execute_run, str(base_path), run.overrides, str(store.run_dir(run.run_id)),
-                                    run.run_id, run.index, run_fn)] = run
+            futures[executor.submit(execute_run, RunJob.of(run, str(base_path)), run_fn)] = run
         except cf.BrokenExecutor:
             return k
     return len(todo)
@@ -341,20 +347,19 @@ def _submit(executor: cf.Executor, base_path: Path, todo: Sequence[Run], store: 
 
 def _collect(futures: Mapping[cf.Future, Run], plan: SweepPlan, store: SweepStore, outcome: _Outcome,
              bar) -> None:
-    """Wait for ``futures`` as they complete; each goes into ``outcome`` and the table is rewritten."""
+    """Wait for ``futures`` as they complete; each finished run is saved in ``store`` (by this process:
+    workers write nothing there), goes into ``outcome``, and the table is rewritten."""
     for future in cf.as_completed(futures):
         run = futures[future]
         try:
-            outcome.records[run.run_id] = future.result()
+            output = future.result()
         except Exception as exc:  # noqa: BLE001 - a run's failure must not stop the others
-            # A worker that died after writing its result still finished the run.
-            record = store.record(run.run_id)
-            if record is not None:
-                outcome.records[run.run_id] = record
-            elif lost_worker(exc):
+            if lost_worker(exc):
                 outcome.lost.append(run.run_id)
             else:
                 outcome.errors[run.run_id] = _one_line_error(exc)
+        else:
+            outcome.records[run.run_id] = store.save(output)
         store.write_table(plan, outcome.records)
         bar.update(1)
 
