@@ -14,11 +14,12 @@ import argparse
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import Sequence
 
 from orchestrator import __version__
-from orchestrator.inputs.errors import UserInputError, one_line
+from orchestrator.inputs.errors import UserInputError, UserInputWarning, one_line
 
 PROG = "turnout"
 EXIT_USAGE = 2  # bad input (also argparse's status for usage errors)
@@ -85,8 +86,8 @@ def _add_scenario_args(p: argparse.ArgumentParser) -> None:
 
 def _add_executor_options(p: argparse.ArgumentParser) -> None:
     """--workers, --scheduler, --no-progress: where the runs of a study go (orchestrator.sweeps.executors)."""
-    p.add_argument("--workers", metavar="N", type=_positive_int, default=2,
-                   help="local worker processes (default: 2; ignored with --scheduler)")
+    p.add_argument("--workers", metavar="N", type=_positive_int, default=None,
+                   help="local worker processes (default: one per core; ignored with --scheduler)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster, e.g. tcp://10.0.0.5:8786 (needs dask[distributed])")
     p.add_argument("--no-progress", action="store_true", help="do not show a progress bar")
@@ -115,6 +116,12 @@ def _add_run_command(sub) -> None:
     run.add_argument("--backend", choices=("fmu", "inprocess"), default="fmu",
                      help="fmu: the track and vehicle FMUs through FMPy (default); inprocess: the same "
                           "model objects without the FMU boundary")
+    run.add_argument("--save-states", action="store_true",
+                     help="also write the track's reduced states (track/q, v, a; u = T q) to results.h5 "
+                          "(about 70 MB per 5000 output steps each, before compression)")
+    run.add_argument("--dry-run", action="store_true",
+                     help="check only: load and validate SCENARIO, build its layout, place the vehicle, check a "
+                          "third-party FMU's ports; print the plan and a rough run time, simulate nothing")
     run.set_defaults(handler=_cmd_run)
 
 
@@ -264,8 +271,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from orchestrator.inputs.scenario import load_scenario
 
     scenario = load_scenario(args.scenario, overrides=args.overrides)
+    if args.dry_run:
+        from orchestrator.cosim.passage import plan_run
+
+        print(f"{PROG}: {args.scenario}: valid; {plan_run(scenario).summary()} (dry run: nothing simulated)")
+        return 0
     out_dir = args.out if args.out is not None else RESULTS_DIR / scenario.name
-    _jobs().run_scenario(scenario, out_dir, progress=not args.no_progress, backend=args.backend)
+    _jobs().run_scenario(scenario, out_dir, progress=not args.no_progress, backend=args.backend,
+                         save_states=args.save_states)
     print(f"{PROG}: results in {out_dir}")
     return 0
 
@@ -384,6 +397,27 @@ def _cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_handler(args: argparse.Namespace) -> int:
+    """The command's handler, with the warnings about the user's input (:class:`UserInputWarning`)
+    held back and printed as one line each, ``turnout: warning: ...``, once the command has
+    finished: a command that fails on bad input says one line, its error (other warnings
+    show as Python shows them, at once)."""
+    held: list[str] = []
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        if issubclass(category, UserInputWarning):
+            held.append(f"{PROG}: warning: {one_line(message)}")
+        else:
+            sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        status = args.handler(args)
+    for text in held:
+        print(text, file=sys.stderr)
+    return status
+
+
 def _error(message: str) -> int:
     print(f"{PROG}: error: {one_line(message)}", file=sys.stderr)
     return EXIT_USAGE
@@ -399,7 +433,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help / --version
         return exc.code if isinstance(exc.code, int) else 0
     try:
-        return args.handler(args)
+        return _run_handler(args)
     except UserInputError as exc:
         return _error(str(exc))
     except OSError as exc:
@@ -407,7 +441,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         # read-only disk, ...). TURNOUT_DEBUG=1 shows the traceback for bug hunting.
         if os.environ.get("TURNOUT_DEBUG"):
             raise
-        where = f": {exc.filename}" if exc.filename else ""
+        if exc.filename:
+            where = f": {exc.filename}"
+        else:  # a write that failed (disk full, file too large) names no file: name the output
+            out = getattr(args, "out", None)
+            where = f" (writing {out})" if out is not None else ""
         return _error(f"{exc.strerror or exc}{where}")
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)

@@ -28,7 +28,7 @@ def test_run_writes_outputs_and_starts_in_vertical_equilibrium(tmp_path, capsys)
     """
     out = tmp_path / "run"
     rc = main(["run", str(PLAIN_SCENARIO), "--out", str(out), "--no-progress", "--backend", "inprocess",
-               *[a for s in QUICK for a in ("--set", s)]])
+               "--save-states", *[a for s in QUICK for a in ("--set", s)]])  # states: only when asked
     assert rc == 0
     for name in ("sensors.csv", "results.h5", "summary.json", "contact_forces.png", "displacements.png",
                  "envelopes.png", "moments.png", "layout.png"):
@@ -129,3 +129,96 @@ def test_frf_job_and_bad_point(tmp_path, capsys):
     assert main(["frf", str(PLAIN_SCENARIO), "--out", str(out), "--at", "rail_lfet:5.0"]) == 2
     err = capsys.readouterr().err.strip()
     assert "rail_left" in err and "Traceback" not in err and len(err.splitlines()) == 1
+
+
+# ------------------------------------------------------------------ what `turnout run` writes
+DOCUMENTED = ("signals/t", "signals/x", "signals/z", "signals/vz", "signals/Fz", "signals/parts", "signals/rail_z",
+              "analysis/rail_M_max", "analysis/sleeper_M_max", "analysis/ballast_p_max")
+
+
+@pytest.fixture(scope="module")
+def default_runs(tmp_path_factory):
+    """The default scenario shortened to 20 ms (the wheels reach the crossing transition sleeper only in
+    full runs; the outputs are the same kind), through the FMUs, without and with --save-states."""
+    runs = {}
+    for states in (False, True):
+        out = tmp_path_factory.mktemp("states" if states else "default")
+        rc = main(["run", str(DEFAULT_SCENARIO), "--out", str(out), "--no-progress", "--set",
+                   "simulation.duration=0.02"] + (["--save-states"] if states else []))
+        assert rc == 0
+        runs[states] = out
+    return runs
+
+
+def test_default_run_writes_outputs_not_states_and_no_record(default_runs):
+    out = default_runs[False]
+    assert not list(out.rglob("track_record*"))  # the FMU's record file is read and deleted
+    summary = json.loads((out / "summary.json").read_text())
+    sensor_ids = [c for c in np.genfromtxt(out / "sensors.csv", delimiter=",", names=True).dtype.names
+                  if c != "time" and not c.startswith("wheel")]
+    assert sensor_ids  # the default layout's sensors
+    with h5py.File(out / "results.h5") as f:
+        assert "track" not in f  # states only with --save-states
+        for name in DOCUMENTED:
+            assert name in f, name
+        assert f["signals/Fz"].compression == "gzip" and f["signals/Fz"].shuffle
+        rail, sleeper = summary["crossing_rail"], f"sleeper_{summary['transition_sleeper']}"
+        assert f[f"bodies/{rail}/moment"].shape == (summary["steps"] + 1, f[f"bodies/{rail}/coord"].size)
+        assert f[f"bodies/{sleeper}/ballast_pressure"].shape[0] == summary["steps"] + 1
+        csv = np.genfromtxt(out / "sensors.csv", delimiter=",", names=True)
+        for sid in sensor_ids:
+            # sensors.csv keeps 9 significant digits; the HDF5 copy is exact (lossless compression)
+            assert np.allclose(f[f"sensors/{sid}"][:], csv[sid], rtol=1e-8, atol=1e-8 * np.abs(csv[sid]).max())
+        # the envelope written is the one the summary reports
+        assert f["analysis/rail_M_max"][:].max() == pytest.approx(summary["max_rail_moment"], rel=1e-12)
+
+
+def test_summary_counters_report_steps_and_phase_walls(default_runs):
+    """summary.json's counters: the master's steps and phase walls; the track FMU's counters unknown (null)."""
+    summary = json.loads((default_runs[False] / "summary.json").read_text())
+    c = summary["counters"]
+    assert c["steps"] == summary["steps"] == 200    # 20 ms / 0.1 ms
+    for k in ("wall_setup", "wall_initialize", "wall_loop", "wall_finish", "wall_post_processing", "wall_writing"):
+        assert c[k] >= 0.0, k
+    assert c["linear_solves"] is None and c["contact_iterations"] is None   # inside the track FMU
+    # the phases are parts of the job's wall time
+    parts = sum(c[k] for k in ("wall_setup", "wall_initialize", "wall_loop", "wall_finish",
+                               "wall_post_processing", "wall_writing"))
+    assert parts <= summary["wall_seconds"]["job_total"] * (1 + 1e-9)
+
+
+def test_in_process_summary_counters_have_the_track_counters(tmp_path):
+    out = tmp_path / "ip"
+    assert main(["run", str(PLAIN_SCENARIO), "--out", str(out), "--no-progress", "--backend", "inprocess",
+                 *[a for s in QUICK for a in ("--set", s)]]) == 0
+    c = json.loads((out / "summary.json").read_text())["counters"]
+    step = load_scenario(PLAIN_SCENARIO, QUICK).simulation.step
+    assert c["track_steps"] == c["steps"] == round(0.01 / step)   # every communication step steps the track
+    # at least one linear solve and one contact iteration per track step
+    assert c["linear_solves"] >= c["track_steps"] and c["contact_iterations"] >= c["track_steps"]
+    with h5py.File(out / "results.h5") as f:
+        assert "track" not in f
+
+
+def test_saved_states_reproduce_the_rail_deflection_under_the_wheels(default_runs):
+    """With --save-states the stored q recovers the run's rail deflection under each wheel (u = T q
+    at the wheel's point, plus the truncated modes' static correction under its own load, as the
+    track computes it) to the contact iteration's tolerance."""
+    from track.cosim import wheel_sides
+
+    out = default_runs[True]
+    sc = load_scenario(DEFAULT_SCENARIO, ["simulation.duration=0.02"])
+    model = build_track(sc.track)
+    with h5py.File(out / "results.h5") as f:
+        q, x, Fz, rail_z = (f[k][:] for k in ("track/q", "signals/x", "signals/Fz", "signals/rail_z"))
+        assert q.shape == (rail_z.shape[0], model.n) and {"v", "a", "t"} <= set(f["track"])
+        assert "track" not in h5py.File(default_runs[False] / "results.h5")
+    sides = wheel_sides(x.shape[1])
+    recovered = np.array([[model.rail_point(sides[i], x[j, i]).value(q[j], -Fz[j, i]) for i in range(x.shape[1])]
+                          for j in range(1, len(q))])   # row 0 (the start) has no rail deflection yet
+    # The track reports the deflection of its last contact iterate, the stored q is the step's final
+    # state: they differ by the contact Newton's stopping tolerance (dynamics.CONTACT_REL_TOL = 1e-9 of
+    # the wheel force, i.e. ~1e-9 of the deflection through the compliance), measured 1.3e-11 here.
+    assert np.abs(recovered - rail_z[1:]).max() < 1e-9 * np.abs(rail_z[1:]).max()
+    assert np.abs(rail_z[1:]).max() > 1e-4   # a loaded rail (about 1 mm): the comparison is not 0 = 0
+    assert not list(out.rglob("track_record*"))

@@ -663,8 +663,8 @@ def fake_jobs(monkeypatch):
     from orchestrator.results import jobs
 
     calls = []
-    monkeypatch.setattr(jobs, "run_scenario", lambda scenario, out_dir, progress=True, backend="fmu":
-                        calls.append(("run", scenario, out_dir, progress, backend)) or {})
+    monkeypatch.setattr(jobs, "run_scenario", lambda scenario, out_dir, progress=True, backend="fmu",
+                        save_states=False: calls.append(("run", scenario, out_dir, progress, backend)) or {})
     monkeypatch.setattr(jobs, "frf_job", lambda scenario, out_dir, at, fmax:
                         calls.append(("frf", scenario, out_dir, at, fmax)) or {})
     return calls

@@ -104,7 +104,20 @@ class InProcessTrack:
         return e.Fz, e.parts, e.rail_w
 
     def record(self) -> dict:
-        return self.engine.record.arrays()
+        """The recorded states as arrays (``track.cosim.Record.arrays``), called once after the run.
+
+        Stacked one field at a time, each list of per-step rows emptied once stacked: the
+        record is held once plus one field, not twice (the rows are not needed again).
+        """
+        import dataclasses
+
+        rec = self.engine.record
+        out = {}
+        for name in [f.name for f in dataclasses.fields(rec)]:
+            rows = getattr(rec, name)
+            out[name] = np.array(rows)
+            rows.clear()
+        return out
 
     def work(self) -> dict:
         """The track's own work: counters of :class:`track.dynamics.Counters` and wall times [s]."""
@@ -223,6 +236,9 @@ class FmuVehicle:
     """A vehicle FMU (ours or a third party's) seen in our convention."""
 
     def __init__(self, path: Path, ports: list[PortMap], params: dict, start_values: dict):
+        from orchestrator.cosim.ports import check_vehicle_fmu
+
+        check_vehicle_fmu(path, ports, {**params, **start_values})  # before the FMU is loaded (ports.py)
         self.unit = FmuUnit(path, "vehicle", {**params, **start_values})
         self.n = len(ports)
         self._x = self.unit.real_port([p.x for p in ports])

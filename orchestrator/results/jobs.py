@@ -16,7 +16,6 @@ import numpy as np
 
 from track.frf import receptance
 from orchestrator.inputs.track_model import track_model
-from track.post import body_response
 from track.statics import static_equilibrium
 from track.timegrid import step_count
 
@@ -28,6 +27,14 @@ from orchestrator.results.plots_layout import plot_layout
 
 FRF_POINTS = 400          # frequencies of a receptance curve
 FRF_FMIN = 5.0            # Hz
+SENSOR_BLOCK = 500        # output steps per block of virtual-sensor reading (bounds its temporaries)
+STATE_KEYS = ("t", "q", "v", "a")   # what --save-states writes of the track record
+# results.h5 outputs: gzip level 1 with byte shuffle. Measured on the default scenario's outputs
+# (8.1 MB raw): lzf+shuffle 6.9 MB, gzip-1+shuffle 6.6 MB, gzip-4+shuffle 6.6 MB, gzip-4 alone 7.4 MB;
+# writing takes 0.1 s. The states (--save-states, 209 MB of float64 q, v, a) are stored as they are:
+# their mantissas are noise, lzf+shuffle saved 6 % and gzip-1+shuffle 11 % at 2.5x and 5x the write time.
+H5_COMPRESSION = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
+H5_COMPRESS_MIN = 64      # elements: smaller datasets are stored as they are
 
 
 def _progress_bar(enabled: bool, total: int, desc: str):
@@ -44,8 +51,15 @@ def _progress_bar(enabled: bool, total: int, desc: str):
     return update, bar.close
 
 
-def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = "fmu") -> dict:
+def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = "fmu",
+                 save_states: bool = False) -> dict:
     """Co-simulation of ``scenario``; writes sensors.csv, results.h5, summary.json and plots.
+
+    The recorded track states are post-processed in memory (virtual sensors in blocks of
+    :data:`SENSOR_BLOCK` output steps, moment envelopes and ballast pressure by
+    :func:`orchestrator.results.analysis.analyse`) and then dropped: ``results.h5`` holds
+    them (``track/q``, ``v``, ``a``) only with ``save_states``. The track FMU's record file
+    never stays on disk (:func:`orchestrator.cosim.master.run_cosim`).
 
     Returns the summary dict (also written as summary.json). If the run stops early
     (divergence, a failing FMU) everything computed so far is written first and a
@@ -55,10 +69,10 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     res = _cosimulate(scenario, out_dir, progress, backend)
-    model = track_model(scenario.track)  # the same model (cached bodies) for post-processing
+    t_post = time.perf_counter()
+    model = res.track_model if res.track_model is not None else track_model(scenario.track)  # cached bodies
     summary = _run_summary(scenario, backend, model, res)
-    # ---- signals first: nothing computed is lost if a later step fails
-    _write_signals(out_dir, res, _virtual_sensors(scenario, model, res))
+    sensors = _virtual_sensors(scenario, model, res)
     Q0 = 0.5 * scenario.vehicle.axle_load
     summary["contact"] = _contact_summary(res, Q0)
     an = analyse(model, Q0, res)
@@ -67,11 +81,19 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     if meta is not None:
         summary.update({"crossing_rail": meta["crossing_rail"], "transition_sleeper": meta["transition_sleeper"],
                         "crossing_side": meta["crossing_side"]})
-        _write_track_results(out_dir, scenario, model, res, an)
-    else:
-        _write_h5(out_dir / "results.h5", res)
+    states = _states_to_save(res.track_record) if save_states else None
+    res.track_record = None  # post-processed: what is not asked for is not kept
+    t_write = time.perf_counter()
+    # ---- signals first: nothing computed is lost if a later step fails
+    _write_signals(out_dir, res, sensors)
+    _write_h5(out_dir / "results.h5", res, sensors, an, states)
+    del states
+    if meta is not None:
+        _plot_track_results(out_dir, scenario, an)
     _plot_signals(out_dir, scenario, model.layout, res)
-    summary["wall_seconds"]["job_total"] = time.perf_counter() - t_start
+    t_end = time.perf_counter()
+    summary["wall_seconds"]["job_total"] = t_end - t_start
+    summary["counters"] = _counters(res, t_write - t_post, t_end - t_write)
     summary["machine"] = f"{platform.machine()} {platform.system()} py{platform.python_version()}"
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     if res.error:
@@ -80,7 +102,7 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
 
 
 def _cosimulate(scenario, out_dir: Path, progress: bool, backend: str):
-    """Run the co-simulation (FMU work files in ``out_dir/work``), with a progress bar; returns its result."""
+    """Run the co-simulation (built FMUs in ``out_dir/work/fmus``), with a progress bar; returns its result."""
     from orchestrator.cosim.master import run_cosim
 
     sim = scenario.simulation
@@ -104,6 +126,16 @@ def _run_summary(scenario, backend: str, model, res) -> dict:
     }
 
 
+def _counters(res, wall_post: float, wall_write: float) -> dict:
+    """summary.json's ``counters``: the run's :class:`orchestrator.cosim.stats.RunCounters` (``None``
+    where the backend does not measure them: the track FMU's own counters) plus this job's
+    post-processing and writing wall times [s]."""
+    counters = getattr(res.stats, "counters", None)
+    out = counters.to_json() if counters is not None else {}
+    out.update(wall_post_processing=wall_post, wall_writing=wall_write)
+    return out
+
+
 def _contact_summary(res, Q0: float) -> dict:
     """wheel<i> -> max and min contact force and ΔQ = max - ``Q0`` [N] (``Q0`` the static wheel load)."""
     return {f"wheel{i + 1}": {"max_Fz": float(np.nanmax(res.Fz[:, i])),
@@ -111,26 +143,33 @@ def _contact_summary(res, Q0: float) -> dict:
                               "delta_Q": float(np.nanmax(res.Fz[:, i]) - Q0)} for i in range(res.Fz.shape[1])}
 
 
-def _write_track_results(out_dir: Path, scenario, model, res, an) -> None:
-    """results.h5 with the crossing rail and transition sleeper, envelopes.png and moments.png (``an.meta``)."""
-    meta = an.meta
+def _states_to_save(rec: dict | None) -> dict | None:
+    """The recorded states ``--save-states`` writes: time [s] and the reduced coordinates ``q`` [m, rad],
+    their rates ``v`` and accelerations ``a`` (the sensors read ``a``); the full field is ``u = T q``."""
+    if rec is None or not len(rec.get("t", ())):
+        return None
+    return {k: rec[k] for k in STATE_KEYS if k in rec}
+
+
+def _plot_track_results(out_dir: Path, scenario, an) -> None:
+    """envelopes.png and moments.png from the analysis (``an.arrays``, ``an.meta``)."""
+    from track.post import BodyResponse
+
+    meta, a = an.meta, an.arrays
     rail_name, sl_name = meta["crossing_rail"], f"sleeper_{meta['transition_sleeper']}"
-    sl, rec = meta["sleeper"], res.track_record
-    j_r, j_s = meta["j_rail"], meta["j_sleeper"]
-    _write_h5(out_dir / "results.h5", res, rail_name, an.arrays["rail_x"], meta["rail_hist"], sl_name,
-              sl, meta["y_p"], meta["p_t"])
-    plots.save(plots.plot_envelopes(an.arrays["rail_x"], np.stack([an.arrays["rail_M_min"],
-                                                                   an.arrays["rail_M_max"]]),
-                                    sl.coord, np.stack([an.arrays["sleeper_M_min"], an.arrays["sleeper_M_max"]]),
-                                    meta["y_p"], an.arrays["ballast_p_max"], rail_name, sl_name),
+    t = an.scalars
+    plots.save(plots.plot_envelopes(a["rail_x"], np.stack([a["rail_M_min"], a["rail_M_max"]]),
+                                    a["sleeper_y"], np.stack([a["sleeper_M_min"], a["sleeper_M_max"]]),
+                                    a["ballast_y"], a["ballast_p_max"], rail_name, sl_name),
                out_dir / "envelopes.png")
-    inst_r = {f"t = {rec['t'][j_r]:.4f} s (max rail moment)":
-              body_response(model, rail_name, rec["q"][j_r], meta["loads_t"][j_r])}
-    inst_s = {f"t = {rec['t'][j_s]:.4f} s (max sleeper moment)": body_response(model, sl_name, rec["q"][j_s])}
+    inst_r = {f"t = {t['time_max_rail_moment']:.4f} s (max rail moment)":
+              BodyResponse(coord=a["rail_x"], w=a["rail_w_at_max"], moment=a["rail_M_at_max"])}
+    inst_s = {f"t = {t['time_max_sleeper_moment']:.4f} s (max sleeper moment)":
+              BodyResponse(coord=a["sleeper_y"], w=a["sleeper_w_at_max"], moment=a["sleeper_M_at_max"])}
     plots.save(plots.plot_body_lines(inst_r, inst_s, f"{scenario.name}: instants of maximum moment",
                                      rail_name, f"{sl_name} (crossing transition)",
-                                     marks_rail=[an.arrays["x_transition"][0]],
-                                     marks_sleeper=list(an.arrays["wheel_y"])), out_dir / "moments.png")
+                                     marks_rail=[a["x_transition"][0]],
+                                     marks_sleeper=list(a["wheel_y"])), out_dir / "moments.png")
 
 
 def _plot_signals(out_dir: Path, scenario, lay, res) -> None:
@@ -147,8 +186,14 @@ def _plot_signals(out_dir: Path, scenario, lay, res) -> None:
 
 
 def _virtual_sensors(scenario, model, res) -> dict:
-    """The sensor layout's signals (DESIGN.md §4.3) at the output times; {} without a track record."""
-    from track.sensors import compile_sensors, sensor_signals
+    """The sensor layout's signals (DESIGN.md §4.3) at the output times; {} without a track record.
+
+    Read in blocks of :data:`SENSOR_BLOCK` output steps (the ballast pressures of a whole
+    record are not materialised at once); displacement sensors are reconstructed from
+    their accelerometer's whole signal afterwards, as :func:`track.sensors.sensor_signals`
+    does in one go.
+    """
+    from track.sensors import compile_sensors, displacement_from_acceleration, sensor_signals
 
     from orchestrator.inputs.sensor_layout import layout_of, scenario_sensors
 
@@ -161,7 +206,16 @@ def _virtual_sensors(scenario, model, res) -> dict:
     layout = layout_of(scenario)
     compiled = compile_sensors(model, sensors)
     dt = float(np.median(np.diff(rec["t"])))
-    return sensor_signals(model, compiled, rec["q"], rec["v"], rec["a"], dt, layout.displacement_highpass)
+    nt = len(rec["t"])
+    blocks = [sensor_signals(model, compiled, rec["q"][b:b + SENSOR_BLOCK], rec["v"][b:b + SENSOR_BLOCK],
+                             rec["a"][b:b + SENSOR_BLOCK], dt, layout.displacement_highpass, reconstruct=False)
+              for b in range(0, nt, SENSOR_BLOCK)]
+    out = {}
+    for s in compiled.sensors:
+        sig = np.concatenate([blk[s.id] for blk in blocks])
+        out[s.id] = displacement_from_acceleration(sig, dt, layout.displacement_highpass) \
+            if s.type == "displacement" else sig
+    return out
 
 
 def _write_signals(out_dir: Path, res, sensors: dict) -> None:
@@ -179,22 +233,49 @@ def _write_signals(out_dir: Path, res, sensors: dict) -> None:
                header=",".join(cols), comments="", fmt="%.9g")
 
 
-def _write_h5(path, res, rail_name=None, rail_coord=None, rail_hist=None, sl_name=None, sl_resp=None,
-              y_p=None, p_t=None) -> None:
+def _put(group, name: str, data, compress: bool = True) -> None:
+    """One dataset, compressed (:data:`H5_COMPRESSION`) unless asked not to or too small to gain."""
+    data = np.asarray(data)
+    if compress and data.size >= H5_COMPRESS_MIN:
+        group.create_dataset(name, data=data, **H5_COMPRESSION)
+    else:
+        group.create_dataset(name, data=data)
+
+
+def _write_h5(path, res, sensors: dict, an=None, states: dict | None = None) -> None:
+    """results.h5 (README "What `turnout run` writes"): ``signals/``, ``sensors/``, ``bodies/`` and
+    ``analysis/`` (from ``an``), and ``track/`` (the reduced states) only when ``states`` are given."""
     import h5py
+
     with h5py.File(path, "w") as f:
         f.attrs["description"] = "co-simulation signals (SI units, z up +) and track post-processing"
+        g = f.create_group("signals")
         for k in ("t", "x", "z", "vz", "Fz", "parts", "rail_z"):
-            f[f"signals/{k}"] = getattr(res, k)
-        if res.track_record is not None:
-            for k, v in res.track_record.items():
-                f[f"track/{k}"] = v
-        if rail_name is not None:
-            g = f.create_group(f"bodies/{rail_name}")
-            g["coord"], g["moment"] = rail_coord, rail_hist
-            g = f.create_group(f"bodies/{sl_name}")
-            g["coord"], g["moment"], g["w"] = sl_resp.coord, sl_resp.moment, sl_resp.w
-            g["ballast_y"], g["ballast_pressure"] = y_p, p_t
+            _put(g, k, getattr(res, k))
+        g = f.create_group("sensors")
+        for k, v in sensors.items():
+            _put(g, k, v)
+        meta = getattr(an, "meta", None)
+        if meta is not None:
+            sl = meta["sleeper"]
+            g = f.create_group(f"bodies/{meta['crossing_rail']}")
+            _put(g, "coord", an.arrays["rail_x"])
+            _put(g, "moment", meta["rail_hist"])
+            g = f.create_group(f"bodies/sleeper_{meta['transition_sleeper']}")
+            for k, v in (("coord", sl.coord), ("moment", sl.moment), ("w", sl.w), ("ballast_y", meta["y_p"]),
+                         ("ballast_pressure", meta["p_t"])):
+                _put(g, k, v)
+        if an is not None and an.arrays:
+            g = f.create_group("analysis")
+            for k, v in an.arrays.items():
+                _put(g, k, v)
+        if states is not None:
+            g = f.create_group("track")
+            g.attrs["description"] = ("reduced (Craig-Bampton) coordinates q of the track model built from the "
+                                      "scenario, their rates v and accelerations a at the times t; "
+                                      "displacements are u = T q")
+            for k, v in states.items():
+                _put(g, k, v, compress=False)  # see H5_COMPRESSION
 
 
 def _write_frf(out_dir: Path, f: np.ndarray, H: np.ndarray, label: str) -> None:
