@@ -412,3 +412,23 @@ def test_property_mutated_dicts_raise_scenario_errors_only():
             assert "\n" not in str(exc) and str(exc).startswith("<dict>")
 
     check()
+
+
+# ------------------------------------------------------------------------------------------
+# An output folder that already holds results (issue "no traceback on bad input", item 11)
+# ------------------------------------------------------------------------------------------
+def test_an_earlier_runs_folder_is_named_in_a_warning_and_a_file_as_out_is_an_error(tmp_path):
+    import warnings
+
+    from orchestrator.results.outdir import prepare_out_dir
+
+    out = tmp_path / "o"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")        # a fresh folder: no warning at all
+        prepare_out_dir(out)
+    (out / "summary.json").write_text("{}")
+    with pytest.warns(UserInputWarning, match="held the results of an earlier run"):
+        prepare_out_dir(out)
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(UserInputError, match="exists and is not a folder"):
+        prepare_out_dir(tmp_path / "f")
