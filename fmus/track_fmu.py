@@ -34,9 +34,17 @@ front wheelset left, right, then the next:
   ``pad_stiffness`` [N/m], ``ballast_stiffness_per_length`` [N/m2] (N/m per m),
   ``void_sleeper`` (Integer; -1: no change; else the void under that sleeper is
   added or replaced by ``void_gap_1`` .. ``void_gap_6`` [m]), ``extrapolate``,
-  ``extrapolate_force``, ``auto_offset`` (Boolean), ``record_every`` (Integer, 0: no recording); and,
-  tunable, ``record_file`` (String, read at terminate: if not empty the recorded
-  states are written there as ``.npz``).
+  ``extrapolate_force``, ``auto_offset`` (Boolean), ``record_every`` (Integer, 0: no recording),
+  ``record_columns`` (String: empty records every column of q, v and a; else JSON
+  ``{"q": [i, ...], "v": [...], "a": [...]}``, the columns of each field to record, a field
+  left out not recorded: a host that post-processes a few bodies and sensors records
+  what it reads, not the whole state); and, tunable, ``record_file`` (String, read at
+  terminate: if not empty the recorded states are written there as ``.npz``).
+  The record is preallocated for the host's stop time (``setupExperiment``) when it gives
+  one, and written to the file without a copy.
+* outputs, monitoring: the integrator's work counters ``track_steps``, ``linear_solves``,
+  ``contact_iterations``, ``passes``, ``factorizations`` (Integer) and the wall times
+  ``wall_statics``, ``wall_factor`` [s] (0 until the first step)
 
 Lazy construction: ``TrackCosim`` needs the communication step, which the FMU
 learns at its first ``doStep``; it is built there, and its first step puts the
@@ -89,13 +97,15 @@ from pythonfmu.variables import Integer, Real, String
 from .base import UNITS, CosimSlave
 
 try:  # inside a built FMU the model package is bundled next to this module
-    from .track import ballast as _ballast, cosim as _cosim, model as _model, params as _params
+    from .track import ballast as _ballast, cosim as _cosim, dynamics as _dynamics, model as _model
+    from .track import params as _params
     from .track import sensors as _sensors
     from .track.solid import crossing as _crossing
 except ModuleNotFoundError as _exc:  # source tree: src/ on sys.path
     if _exc.name != f"{__package__}.track":
         raise   # a dependency of the bundled package is missing (scipy, ...): say which
-    from track import ballast as _ballast, cosim as _cosim, model as _model, params as _params
+    from track import ballast as _ballast, cosim as _cosim, dynamics as _dynamics, model as _model
+    from track import params as _params
     from track import sensors as _sensors
     from track.solid import crossing as _crossing
 
@@ -109,6 +119,13 @@ N_VOID_GAPS = 6                    # gaps at 6 equidistant points along a sleepe
 STEP_RTOL = 1e-9                   # step sizes closer than this (relative) count as equal: libcosim
                                    # converts its integer-ns clock and hands over h(1 + 1e-12)
 SIDE = ("left", "right")
+COUNTER_OUTPUTS = {   # Integer output -> (attribute of track.dynamics.Counters, what it counts)
+    "track_steps": ("steps", "time steps of the track integrator"),
+    "linear_solves": ("solves", "linear solves with the step matrix"),
+    "contact_iterations": ("contact_newton", "Newton sweeps of the Hertz contact forces"),
+    "passes": ("iterations", "modified-Newton passes of the track steps"),
+    "factorizations": ("factorizations", "factorizations of the step matrix"),
+}
 SENSOR_UNITS = {"pressure": "Pa", "acceleration": "m/s2", "strain": "-", "displacement": "m"}
 ACCELEROMETER_SUFFIX = "_acc"      # <id>_acc: the accelerometer signal of displacement sensor <id>
 RUN_DEFAULTS = {"speed": 33.333, "static_wheel_load": 98100.0, "extrapolate": True,
@@ -248,33 +265,45 @@ class Track(CosimSlave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        if self.resources is None:
-            raise FileNotFoundError(f"the track FMU needs its resources folder (with {RESOURCE_FILE})")
-        baked = json.loads((Path(self.resources) / RESOURCE_FILE).read_text(encoding="utf-8"))
-        if baked.get("format") != RESOURCE_FORMAT:
-            raise ValueError(f"{RESOURCE_FILE}: format {baked.get('format')!r}, expected {RESOURCE_FORMAT!r}")
-        self._baked = _params.track_params_from_dict(baked["track"])
-        self._sensors = tuple(_sensors.Sensor(**d) for d in baked.get("sensors", ()))
-        n = self._n = int(baked["n_wheels"])
-        p = self._baked
-        voids = p.ballast.voids
-        first_void = voids[0] if voids else None   # defaults reproduce it: replacing it changes nothing
-        self._values: Dict[str, Any] = dict(baked["defaults"])
-        self._values.update(
-            h1=p.ballast.stiffness_scale, h2=p.rail_pad.stiffness_scale, impact_angle=p.impact_angle,
-            pad_stiffness=p.rail_pad.stiffness, ballast_stiffness_per_length=p.ballast.stiffness_per_length,
-            void_sleeper=first_void.sleeper if first_void else -1, record_file="")
-        for j in range(N_VOID_GAPS):
-            self._values[f"void_gap_{j + 1}"] = float(first_void.gaps[j]) if first_void else 0.0
-
-        self._x, self._z, self._vz = np.zeros(n), np.zeros(n), np.zeros(n)  # inputs
+        self._read_baked()
+        self._x, self._z, self._vz = np.zeros(self._n), np.zeros(self._n), np.zeros(self._n)  # inputs
         self._model = None        # TrackModel, built at exitInitializationMode
         self._built = None        # the TrackParams it was built from
         self._cosim = None        # TrackCosim, built at the first doStep (needs the step)
         self._t_first = None      # time of the first doStep [s] (TrackCosim's time 0)
         self._reader = None       # SensorReader of the model, built with it
         self._sensor_values = None  # its values at the current state; None: not read since the last step
+        self.stop_time = None     # the host's stop time [s] (setupExperiment), to size the record
+        self._cosim_columns = ""  # record_columns of the TrackCosim built last
+        self._add_model_parameters()
+        self._add_run_parameters()
+        self._add_wheel_ports()
+        self._add_counter_outputs()
+        self._add_sensor_outputs()
 
+    def _read_baked(self) -> None:
+        """The baked resource file: track parameters, sensors, wheel count and the parameters'
+        start values (the model parameters' from the baked track: the defaults change nothing)."""
+        if self.resources is None:
+            raise FileNotFoundError(f"the track FMU needs its resources folder (with {RESOURCE_FILE})")
+        baked = json.loads((Path(self.resources) / RESOURCE_FILE).read_text(encoding="utf-8"))
+        if baked.get("format") != RESOURCE_FORMAT:
+            raise ValueError(f"{RESOURCE_FILE}: format {baked.get('format')!r}, expected {RESOURCE_FORMAT!r}")
+        self._baked = p = _params.track_params_from_dict(baked["track"])
+        self._sensors = tuple(_sensors.Sensor(**d) for d in baked.get("sensors", ()))
+        self._n = int(baked["n_wheels"])
+        voids = p.ballast.voids
+        first_void = voids[0] if voids else None   # defaults reproduce it: replacing it changes nothing
+        self._values: Dict[str, Any] = dict(baked["defaults"])
+        self._values.update(
+            h1=p.ballast.stiffness_scale, h2=p.rail_pad.stiffness_scale, impact_angle=p.impact_angle,
+            pad_stiffness=p.rail_pad.stiffness, ballast_stiffness_per_length=p.ballast.stiffness_per_length,
+            void_sleeper=first_void.sleeper if first_void else -1, record_file="", record_columns="")
+        for j in range(N_VOID_GAPS):
+            self._values[f"void_gap_{j + 1}"] = float(first_void.gaps[j]) if first_void else 0.0
+
+    def _add_model_parameters(self) -> None:
+        """The parameters that change the track model: speed, loads, stiffness scales, voids, ..."""
         self.add_parameter("speed", "vehicle speed along increasing x, to extrapolate wheel_x over a "
                            "step and to start the static state", "m/s", *self._accessors("speed"))
         self.add_parameter("static_wheel_load", "static load of each wheel (axle_load / 2), positive; the "
@@ -297,6 +326,9 @@ class Track(CosimSlave):
             self.add_parameter(f"void_gap_{j + 1}", f"ballast void gap at point {j + 1} of 6, equidistant "
                                "from sleeper end to end (used when void_sleeper >= 0)", "m",
                                *self._accessors(f"void_gap_{j + 1}"))
+
+    def _add_run_parameters(self) -> None:
+        """How the FMU is coupled and what it records: extrapolation, offset, record settings."""
         self.add_parameter("extrapolate", "true: inputs are start-of-step values, extrapolated with vz and "
                            "speed (Jacobi hosts); false: end-of-step values (Gauss-Seidel, vehicle first)",
                            "-", *self._accessors("extrapolate", bool), boolean=True)
@@ -311,12 +343,23 @@ class Track(CosimSlave):
         self._register(String("record_file", causality=Fmi2Causality.parameter,
                               variability=Fmi2Variability.tunable,
                               description=self._describe("if not empty: at terminate the recorded states "
-                                                         "(t, q, v, x, Fz, parts) are written to this .npz",
+                                                         "(t, q, v, a, x, Fz, parts) are written to this .npz",
                                                          "-"),
                               getter=lambda: self._values["record_file"],
                               setter=lambda value: self._values.__setitem__("record_file", str(value))), "-")
+        self._register(String("record_columns", causality=Fmi2Causality.parameter,
+                              variability=Fmi2Variability.fixed,
+                              description=self._describe(
+                                  "what to record of the states: empty for every column of q, v and a; "
+                                  'else JSON {"q": [i, ...], "v": [...], "a": [...]} with the columns '
+                                  "(0-based) of each field to record, a field left out is not recorded",
+                                  "-"),
+                              getter=lambda: self._values["record_columns"],
+                              setter=self._accessors("record_columns", str)[1]), "-")
 
-        for i in range(n):
+    def _add_wheel_ports(self) -> None:
+        """Per wheel: the inputs x, z, vz and the outputs Fz, Fz_coupling, Fz_rail, Fz_nose, rail_z."""
+        for i in range(self._n):
             label = self._label(i)
             self.add_input(f"wheel{i + 1}_x", f"track coordinate of wheel {i + 1} ({label})", "m",
                            *self._input(self._x, i))
@@ -324,7 +367,7 @@ class Track(CosimSlave):
                            "point, upward +", "m", *self._input(self._z, i))
             self.add_input(f"wheel{i + 1}_vz", f"vertical velocity of wheel {i + 1} ({label}), upward +",
                            "m/s", *self._input(self._vz, i))
-        for i in range(n):
+        for i in range(self._n):
             label = self._label(i)
             self._add_output_with_start(
                 f"wheel{i + 1}_Fz", f"vertical contact force on wheel {i + 1} ({label}), upward +; "
@@ -342,7 +385,25 @@ class Track(CosimSlave):
                             "crossing nose", "N", lambda i=i: self._output("nose", i))
             self.add_output(f"wheel{i + 1}_rail_z", f"rail deflection under wheel {i + 1} ({label}), "
                             "upward +; 0 until the first step", "m", lambda i=i: self._output("rail_z", i))
-        self._add_sensor_outputs()
+
+    def _add_counter_outputs(self) -> None:
+        """The integrator's work counters (:data:`COUNTER_OUTPUTS`, Integer) and the wall times of the
+        static equilibrium and of the step-matrix factorization (Real, [s]); 0 until the first step."""
+        for name, (attr, text) in COUNTER_OUTPUTS.items():
+            self._register(Integer(name, causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
+                                   description=self._describe(f"{text} so far (monitoring)", "-"),
+                                   getter=lambda attr=attr: int(getattr(self._counters(), attr))), "-")
+            self._initial_dependencies[name] = ()
+        for name, text in (("wall_statics", "static equilibrium under the wheels at the first step"),
+                           ("wall_factor", "set-up of the time integrator (LU of the step matrix)")):
+            self._register(Real(name, causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
+                                description=self._describe(f"wall time of the {text} (monitoring)", "s"),
+                                getter=lambda name=name: float(getattr(self._cosim, name, 0.0))), "s")
+            self._initial_dependencies[name] = ()
+
+    def _counters(self) -> "_dynamics.Counters":
+        c = self._cosim
+        return c.counters if c is not None else _dynamics.Counters()
 
     # ------------------------------------------------------------- registration
     def _add_integer(self, name: str, description: str) -> None:
@@ -457,6 +518,29 @@ class Track(CosimSlave):
                              f"index 0..{n_sleepers - 1}")
         if v["record_every"] < 0:
             raise ValueError(f"parameter record_every = {v['record_every']} must be >= 0")
+        self._record_columns()
+
+    def _record_columns(self) -> dict | None:
+        """The parameter ``record_columns`` parsed: None (all of q, v, a) or field -> column indices.
+
+        Raises
+        ------
+        ValueError
+            Not a JSON object of lists of integers with keys among q, v, a.
+        """
+        text = self._values["record_columns"].strip()
+        if not text:
+            return None
+        try:
+            spec = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"parameter record_columns is not JSON: {exc}") from None
+        if not isinstance(spec, dict) or not set(spec) <= set(_cosim.STATE_FIELDS) or not all(
+                isinstance(c, list) and all(isinstance(i, int) and not isinstance(i, bool) for i in c)
+                for c in spec.values()):
+            raise ValueError(f"parameter record_columns = {text[:60]!r}: expected a JSON object with keys among "
+                             f"{list(_cosim.STATE_FIELDS)}, each a list of column indices (integers)")
+        return spec
 
     def track_params(self) -> "_params.TrackParams":
         """The baked track parameters with the FMU parameters applied."""
@@ -483,11 +567,21 @@ class Track(CosimSlave):
         self._sensor_values = None
 
     def _new_cosim(self, h: float) -> "_cosim.TrackCosim":
+        """The TrackCosim of step ``h`` [s]; its record sized for the host's stop time when it gave one."""
         v = self._values
-        return _cosim.TrackCosim(self._built, self._n, v["static_wheel_load"], h, speed=v["speed"],
-                                 extrapolate=v["extrapolate"], auto_offset=v["auto_offset"],
-                                 record_every=v["record_every"], model=self._model,
-                                 extrapolate_force=v["extrapolate_force"])
+        c = _cosim.TrackCosim(self._built, self._n, v["static_wheel_load"], h, speed=v["speed"],
+                              extrapolate=v["extrapolate"], auto_offset=v["auto_offset"],
+                              record_every=v["record_every"], model=self._model,
+                              extrapolate_force=v["extrapolate_force"], record_columns=self._record_columns())
+        self._cosim_columns = v["record_columns"]   # what the record holds (_same_settings)
+        if v["record_every"] and self.stop_time is not None and self.stop_time > self.start_time:
+            steps = int(math.floor((self.stop_time - self.start_time) / h * (1.0 + STEP_RTOL)))
+            c.record.reserve(steps // v["record_every"] + 1)
+        return c
+
+    def setup_experiment(self, start_time: float, stop_time=None, tolerance=None):
+        super().setup_experiment(start_time, stop_time, tolerance)
+        self.stop_time = None if stop_time is None else float(stop_time)
 
     # ----------------------------------------------------------------- lifecycle
     def initialize_model(self) -> None:
@@ -495,6 +589,11 @@ class Track(CosimSlave):
         self._build_model()
         self._cosim = None
         self._t_first = None
+        if self._model is not None:
+            spec = self._record_columns() or {}
+            bad = [k for k, cols in spec.items() if any(not 0 <= i < self._model.n for i in cols)]
+            if bad:
+                raise ValueError(f"parameter record_columns: columns of {bad[0]} must lie in 0..{self._model.n - 1}")
         if self._values["record_file"] and not self._values["record_every"]:
             self.log_warning("record_file is set but record_every = 0: nothing will be recorded")
 
@@ -536,21 +635,25 @@ class Track(CosimSlave):
             self.log_error(f"record_file {path!r} could not be written: {type(exc).__name__}: {exc}")
 
     def write_record(self, path: str | Path) -> Path:
-        """Write the recorded states as ``.npz``.
+        """Write the recorded states as ``.npz`` (uncompressed, straight from the record's arrays).
 
-        Arrays: ``t`` (nt,) simulation time [s], ``q``, ``v`` (nt, n_dofs) reduced coordinates and
-        their rates, ``x`` (nt, n_wheels) [m], ``Fz`` (nt, n_wheels) [N], ``parts``
-        (nt, n_wheels, 2) [N] (rail / wing rail, nose); and ``track_params`` (the
-        effective parameters as UTF-8 JSON bytes, for ``track.params.track_params_from_dict``),
-        ``static_wheel_load`` [N], ``h`` [s].  With no step taken the arrays are empty.
+        Arrays: ``t`` (nt,) simulation time [s]; ``q``, ``v``, ``a`` reduced coordinates [m, rad],
+        their rates and accelerations, (nt, n_dofs) or, with ``record_columns``, (nt, k) for the
+        fields asked for, each with ``<field>_columns`` (k,) its columns
+        (``track.cosim.state_rows`` restores full rows); ``x`` (nt, n_wheels) [m], ``Fz``
+        (nt, n_wheels) [N], ``parts`` (nt, n_wheels, 2) [N] (rail / wing rail, nose); and
+        ``track_params`` (the effective parameters as UTF-8 JSON bytes, for
+        ``track.params.track_params_from_dict``), ``static_wheel_load`` [N], ``h`` [s].  With no
+        step taken the arrays are empty.
         """
         path = Path(path)
         if self._cosim is not None:
-            arrays = self._cosim.record.arrays()
+            arrays = self._cosim.record.arrays()   # views: np.savez writes them in chunks, no copy
             arrays["t"] = arrays["t"] + self._t_first
             h = self._cosim.h
         else:
-            arrays = _cosim.Record().arrays()
+            n_dofs = self._model.n if self._model is not None else 0
+            arrays = _cosim.Record(n_dofs, self._n, self._record_columns()).arrays()
             h = float("nan")
         params = self._built if self._built is not None else self.track_params()
         params_json = json.dumps(dataclasses.asdict(params)).encode("utf-8")  # bytes: HDF5-friendly
@@ -587,4 +690,5 @@ class Track(CosimSlave):
         return (c.h == h and c.speed == v["speed"] and c.extrapolate == v["extrapolate"]
                 and c.extrapolate_force == v["extrapolate_force"]
                 and c.auto_offset == v["auto_offset"] and c.record_every == v["record_every"]
+                and self._cosim_columns == v["record_columns"]
                 and np.all(c.Q0 == v["static_wheel_load"]))

@@ -470,6 +470,46 @@ def test_record_file_holds_the_recorded_states_and_the_effective_parameters(inst
     assert track_params_from_dict(json.loads(rec["track_params"].item())) == expected
 
 
+def test_record_columns_and_stop_time_give_the_full_records_columns_and_the_counters(instances, tmp_path):
+    """record_columns = some columns of q and of a (no v), the host's stop time given: the record holds
+    exactly those columns of the full record of the same run (the same inputs), with their indices,
+    and no v; the monitoring outputs count what the track did (one track step per doStep, at least one
+    linear solve and contact sweep each) and are 0 before the first step; malformed columns fail the
+    initialization with a message naming the parameter."""
+    from track.cosim import state_rows
+
+    n_dofs = build_track(PARAMS).n
+    cols = {"q": [0, 5, 17, n_dofs - 1], "a": [3, 4]}
+    full_path, part_path = tmp_path / "full.npz", tmp_path / "part.npz"
+    full = instances("track2", "rec_full").init(speed=5.0, record_every=10, record_file=str(full_path))
+    part = instances("track2", "rec_part")
+    part.fmu.setupExperiment(startTime=0.0, stopTime=100 * H)
+    part.fmu.enterInitializationMode()
+    part.set_parameters(speed=5.0, record_every=10, record_file=str(part_path), record_columns=json.dumps(cols))
+    part.fmu.exitInitializationMode()
+    counters = ("track_steps", "linear_solves", "contact_iterations", "passes", "factorizations")
+    assert part.fmu.getInteger([part.vr[k] for k in counters]) == [0] * 5
+    drive(full, 0, 100)
+    drive(part, 0, 100)
+    steps, solves, sweeps, passes, factors = part.fmu.getInteger([part.vr[k] for k in counters])
+    assert steps == 100 and solves >= steps and sweeps >= steps and passes >= steps and factors >= 1
+    assert part.fmu.getReal([part.vr["wall_statics"], part.vr["wall_factor"]])[1] > 0.0
+    full.close()
+    part.close()
+    a, b = np.load(full_path), np.load(part_path)
+    assert "v" not in b.files and b["q"].shape == (11, 4) and b["a"].shape == (11, 2)
+    np.testing.assert_array_equal(b["q_columns"], cols["q"])
+    np.testing.assert_array_equal(b["q"], a["q"][:, cols["q"]])   # the same arithmetic: bit-identical
+    np.testing.assert_array_equal(b["a"], a["a"][:, cols["a"]])
+    np.testing.assert_array_equal(state_rows(dict(b), "q", n_dofs)[:, cols["q"]], a["q"][:, cols["q"]])
+    np.testing.assert_array_equal(b["Fz"], a["Fz"])
+
+    bad = instances("track2", "rec_bad").init(record_every=1, record_columns='{"q": [0, "x"]}')
+    with pytest.raises(FMICallException):
+        bad.fmu.doStep(0.0, H)
+    assert any("record_columns" in m for _, m in bad.messages)
+
+
 # ------------------------------------------------------------------ several FMUs at once
 def test_gauss_seidel_with_the_bogie_fmu_in_one_process(instances):
     """Track (4 wheels) and bogie FMUs in one interpreter, Gauss-Seidel with the

@@ -174,13 +174,18 @@ def test_default_run_writes_outputs_not_states_and_no_record(default_runs):
 
 
 def test_summary_counters_report_steps_and_phase_walls(default_runs):
-    """summary.json's counters: the master's steps and phase walls; the track FMU's counters unknown (null)."""
+    """summary.json's counters: the master's steps and phase walls, and the track FMU's own counters
+    (its monitoring outputs, read at terminate)."""
     summary = json.loads((default_runs[False] / "summary.json").read_text())
     c = summary["counters"]
     assert c["steps"] == summary["steps"] == 200    # 20 ms / 0.1 ms
     for k in ("wall_setup", "wall_initialize", "wall_loop", "wall_finish", "wall_post_processing", "wall_writing"):
         assert c[k] >= 0.0, k
-    assert c["linear_solves"] is None and c["contact_iterations"] is None   # inside the track FMU
+    # the track FMU steps once per communication step, with at least one solve and contact sweep each
+    assert c["track_steps"] == c["steps"]
+    assert c["linear_solves"] >= c["track_steps"] and c["contact_iterations"] >= c["track_steps"]
+    assert c["passes"] >= c["track_steps"] and c["factorizations"] >= 1
+    assert c["wall_statics"] > 0.0 and c["wall_factor"] > 0.0
     # the phases are parts of the job's wall time
     parts = sum(c[k] for k in ("wall_setup", "wall_initialize", "wall_loop", "wall_finish",
                                "wall_post_processing", "wall_writing"))
@@ -222,3 +227,77 @@ def test_saved_states_reproduce_the_rail_deflection_under_the_wheels(default_run
     assert np.abs(recovered - rail_z[1:]).max() < 1e-9 * np.abs(rail_z[1:]).max()
     assert np.abs(rail_z[1:]).max() > 1e-4   # a loaded rail (about 1 mm): the comparison is not 0 = 0
     assert not list(out.rglob("track_record*"))
+
+
+def test_recording_only_the_read_columns_changes_no_output(default_runs):
+    """The default run records only the columns of the states that the analysis and the sensors read
+    (about 300 of 1741); the --save-states run records them all. Every post-processed output agrees
+    exactly: the columns not recorded are never read (analysis_columns, sensor_columns), and the
+    full rows are rebuilt with zeros there, so not even the order of summation changes."""
+    files = [h5py.File(default_runs[states] / "results.h5") for states in (False, True)]
+    names = []
+    files[0].visititems(lambda k, o: names.append(k) if isinstance(o, h5py.Dataset) else None)
+    assert any(k.startswith("bodies/") for k in names) and any(k.startswith("sensors/") for k in names)
+    for k in names:
+        assert np.array_equal(files[0][k][()], files[1][k][()], equal_nan=True), k
+    a, b = (json.loads((default_runs[s] / "summary.json").read_text()) for s in (False, True))
+    for k in ("max_rail_moment", "max_sleeper_moment", "max_ballast_pressure"):
+        assert a[k] == b[k] != 0.0, k
+
+
+def test_record_columns_cover_what_the_post_processing_reads():
+    """analysis_columns and sensor_columns name few columns, and reading a record with only those
+    columns gives the full record's moments, pressures and sensor signals (random states: any column
+    read outside them would show)."""
+    from orchestrator.cosim.master import merge_columns
+    from orchestrator.cosim.sensing import read_sensors, sensor_columns
+    from orchestrator.inputs.sensor_layout import scenario_sensors
+    from orchestrator.results.analysis import analysis_columns
+    from track.cosim import state_rows
+    from track.model import reference_point
+    from track.post import body_response, sleeper_pressure
+    from track.sensors import compile_sensors
+
+    sc = load_scenario(DEFAULT_SCENARIO)
+    model = build_track(sc.track)
+    compiled = compile_sensors(model, scenario_sensors(sc, model))
+    cols = merge_columns(analysis_columns(model), sensor_columns(model, compiled))
+    assert sum(c.size for c in cols.values()) < 0.25 * 3 * model.n   # measured 320 of 3 x 1741
+    rng = np.random.default_rng(1)
+    full = {"t": np.arange(7) * 1e-4, **{k: 1e-4 * rng.standard_normal((7, model.n)) for k in "qva"}}
+    part = {"t": full["t"], **{k: full[k][:, c] for k, c in cols.items()},
+            **{f"{k}_columns": c for k, c in cols.items()}}
+    q_part = state_rows(part, "q", model.n)
+    side, x_ref, k_tr = reference_point(model)
+    for body in (model.layout.running_body(side, x_ref), f"sleeper_{k_tr}"):
+        assert np.array_equal(body_response(model, body, q_part).moment,
+                              body_response(model, body, full["q"]).moment), body
+    assert np.array_equal(sleeper_pressure(model, k_tr, q_part, state_rows(part, "v", model.n))[1],
+                          sleeper_pressure(model, k_tr, full["q"], full["v"])[1])
+    a = read_sensors(model, compiled, part, 1e-4, 5.0, reconstruct=False)
+    b = read_sensors(model, compiled, full, 1e-4, 5.0, reconstruct=False)
+    for sid in b:
+        assert np.array_equal(a[sid], b[sid]), sid
+
+
+def test_fmus_are_built_once_per_build_inputs_and_copied_from_the_cache(tmp_path, monkeypatch):
+    """cached_fmus builds a scenario's FMUs into the cache once; the next run copies them (the same
+    bytes); another track builds another entry; TURNOUT_CACHE=off builds into the run's folder."""
+    from orchestrator.cosim import build_job
+
+    builds = []
+    real = build_job._build_all
+    monkeypatch.setattr(build_job, "_build_all", lambda inputs, out: builds.append(out) or real(inputs, out))
+    sc = load_scenario(PLAIN_SCENARIO, QUICK)
+    env = {"TURNOUT_CACHE": str(tmp_path / "cache")}
+    first = build_job.cached_fmus(sc, tmp_path / "a", env)
+    second = build_job.cached_fmus(sc, tmp_path / "b", env)
+    assert len(builds) == 1 and builds[0].parent == tmp_path / "cache" / build_job.FMU_CACHE_FOLDER
+    assert set(first) == {"track", "bogie", "quarter"}
+    for kind, path in second.items():
+        assert path.parent == tmp_path / "b" and path.read_bytes() == first[kind].read_bytes(), kind
+    other = load_scenario(PLAIN_SCENARIO, QUICK + ["track.rail_pad.stiffness=1.5e8"])
+    assert build_job.cache_key(build_job.build_inputs(other)) != build_job.cache_key(build_job.build_inputs(sc))
+    build_job.cached_fmus(sc, tmp_path / "c", {"TURNOUT_CACHE": "off"})
+    assert builds[-1] == tmp_path / "c" and len(builds) == 2
+    assert len(list((tmp_path / "cache" / build_job.FMU_CACHE_FOLDER).iterdir())) == 1

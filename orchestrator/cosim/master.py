@@ -27,8 +27,12 @@ held input integrates to second order (the track FMU computes it, so a host such
 libcosim running the exported SSP does exactly the same).
 
 Every run reports what it did (:mod:`orchestrator.cosim.stats`): steps and wall time per
-phase from the master's clock, and in-process the track's own counters (linear solves,
-contact iterations, ...; the track FMU keeps those inside).
+phase from the master's clock, and the track's own counters (linear solves, contact
+iterations, ...; the track FMU's from its monitoring outputs, read at terminate).
+
+What the track records at the output times (``record_columns``) is what the
+post-processing reads: :func:`merge_columns` joins the requests of its parts
+(analysis, sensors); no request records the whole state.
 """
 from __future__ import annotations
 
@@ -49,6 +53,27 @@ from track.timegrid import step_count
 
 RECORD_FILE = "track_record.npz"   # the track FMU's recorded states (a temporary file, read once)
 RECORD_KEYS = ("t", "q", "v", "a", "x", "Fz", "parts")   # what post-processing reads of it
+RECORD_COLUMN_KEYS = tuple(f"{k}_columns" for k in ("q", "v", "a"))   # ... and which columns it holds
+
+
+def merge_columns(*requests: dict) -> dict:
+    """One ``record_columns`` request from several: per state field the union of the columns.
+
+    Parameters
+    ----------
+    *requests : dict
+        State field (``"q"``, ``"v"``, ``"a"``) -> column indices (``track.cosim.Record``).
+
+    Returns
+    -------
+    dict
+        Field -> sorted unique indices (ndarray of int), the fields any request names.
+    """
+    out: dict = {}
+    for req in requests:
+        for name, cols in req.items():
+            out[name] = np.union1d(out.get(name, np.empty(0, np.intp)), np.asarray(cols, np.intp)).astype(np.intp)
+    return out
 
 # ----------------------------------------------------------------------------- run
 @dataclass
@@ -93,12 +118,16 @@ class CosimResult:
 
 
 def make_units(scenario, backend: str, algorithm: str, h: float, record_every: int, fmu_dir: Path | None,
-               work_dir: Path, layout, record_dir: Path | None = None):
+               work_dir: Path, layout, record_dir: Path | None = None, record_columns: dict | None = None,
+               record_rows: int = 0):
     """Vehicle and track units for a backend; returns (vehicle, track, x_front).
 
     The track FMU writes its recorded states (when ``record_every``) at terminate to
     ``record_dir/track_record.npz`` (default ``work_dir``); :func:`run_cosim` gives it a
-    temporary folder and deletes the file once read.
+    temporary folder and deletes the file once read.  ``record_columns`` (field -> column
+    indices; ``None``: every column of q, v, a) says what the track records;
+    ``record_rows`` how many output rows the in-process record reserves (the FMU sizes
+    its record from the stop time the master gives it).
     """
     sim, veh = scenario.simulation, scenario.vehicle
     kind = vehicle_kind(scenario)
@@ -112,14 +141,15 @@ def make_units(scenario, backend: str, algorithm: str, h: float, record_every: i
         if kind == "external":
             raise UserInputError("vehicle.fmu: a third-party FMU needs the fmu backend")
         return (InProcessVehicle(kind, veh.speed, veh.axle_load, x0, veh.start_values, algo.hold),
-                InProcessTrack(scenario, m, h, extrapolate, record_every, extrapolate_force), x0)
+                InProcessTrack(scenario, m, h, extrapolate, record_every, extrapolate_force, record_columns,
+                               record_rows), x0)
     if algo.in_process_only:
         raise UserInputError(f"the {algo.name} algorithm runs in-process only")
     if backend != "fmu":
         raise UserInputError(f"backend {backend!r}: use 'fmu' or 'inprocess'")
-    from orchestrator.cosim.build_job import build_fmus
+    from orchestrator.cosim.build_job import cached_fmus
 
-    fmus = build_fmus(scenario, fmu_dir or work_dir / "fmus")
+    fmus = cached_fmus(scenario, fmu_dir or work_dir / "fmus")
     if kind == "external":
         vpath = Path(veh.fmu)
         ports = list(veh.ports)
@@ -133,14 +163,25 @@ def make_units(scenario, backend: str, algorithm: str, h: float, record_every: i
     track = FmuTrack(fmus["track"], m, {"speed": veh.speed, "static_wheel_load": 0.5 * veh.axle_load,
                                          "extrapolate": extrapolate, "record_every": record_every,
                                          "extrapolate_force": extrapolate_force,
-                                         "record_file": str(rec) if record_every else ""})
+                                         "record_file": str(rec) if record_every else "",
+                                         "record_columns": _columns_text(record_columns)})
     track.record_file = rec
     return vehicle, track, x0
 
 
+def _columns_text(columns: dict | None) -> str:
+    """The track FMU's ``record_columns`` parameter: JSON of the field -> column lists; empty for all."""
+    import json
+
+    if columns is None:
+        return ""
+    return json.dumps({k: [int(i) for i in np.asarray(v).ravel()] for k, v in columns.items()},
+                      separators=(",", ":"))
+
+
 def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_dir: Path | None = None,
               progress: Callable[[int, int], None] | None = None, record_states: bool = True,
-              algorithm: str | None = None) -> CosimResult:
+              algorithm: str | None = None, record_columns: dict | None = None) -> CosimResult:
     """Run the co-simulation of ``scenario``.
 
     Stages: :func:`_set_up` (the units and the time grid), :func:`_drive` (initialize,
@@ -160,10 +201,14 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
     progress : callable, optional
         ``progress(k, nsteps)`` at each output step.
     record_states : bool
-        Record the track state (q, v) at the output times for post-processing.
+        Record the track state (q, v, a) at the output times for post-processing.
     algorithm : str, optional
         Override ``simulation.algorithm``; ``"implicit"`` is the monolithic reference
         (in-process only).
+    record_columns : dict, optional
+        Record only these columns of the states (field -> indices, ``track.cosim.Record``;
+        the record then carries ``<field>_columns``, and ``track.cosim.state_rows`` gives
+        full rows); default every column of q, v and a.
 
     Returns
     -------
@@ -171,7 +216,8 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
         Its ``stats`` (:class:`orchestrator.cosim.stats.CosimStats`) carry the counters of
         the run (``stats.counters``); the track's internal ones in-process only.
     """
-    run = _set_up(scenario, backend, work_dir, fmu_dir, record_states, algorithm or scenario.simulation.algorithm)
+    run = _set_up(scenario, backend, work_dir, fmu_dir, record_states, algorithm or scenario.simulation.algorithm,
+                  record_columns)
     signals = _Signals(run.nsteps // run.every + 1, run.vehicle.n)
     error, t_initialize, t_loop = _drive(run, signals, progress)
     record = _track_record(run) if record_states else None
@@ -231,7 +277,7 @@ class _Signals:
 
 
 def _set_up(scenario, backend: str, work_dir: Path | None, fmu_dir: Path | None, record_states: bool,
-            algorithm: str) -> _Run:
+            algorithm: str, record_columns: dict | None = None) -> _Run:
     """The work folder, the time grid and the two units (timed); returns the :class:`_Run`."""
     import tempfile
 
@@ -255,7 +301,8 @@ def _set_up(scenario, backend: str, work_dir: Path | None, fmu_dir: Path | None,
     t_wall = time.perf_counter()
     try:
         vehicle, track, x0 = make_units(scenario, backend, algorithm, h, every if record_states else 0, fmu_dir,
-                                        work_dir, layout, None if record_tmp is None else Path(record_tmp.name))
+                                        work_dir, layout, None if record_tmp is None else Path(record_tmp.name),
+                                        record_columns, nsteps // every + 1 if record_states else 0)
     except BaseException:
         for t in (tmp, record_tmp):
             if t is not None:
@@ -272,7 +319,7 @@ def _start(run: _Run, signals: _Signals) -> np.ndarray:
         vehicle.initialize(run.h)
     else:
         vehicle.initialize(run.t0)
-        track.initialize(run.t0)
+        track.initialize(run.t0, run.t0 + run.nsteps * run.h)   # the stop time sizes the FMU's record
     Fz = np.array(vehicle.Fz0, float)
     x, z, vz = vehicle.outputs()
     if abs(x[0] - run.x0) > POSITION_TOL:
@@ -350,19 +397,18 @@ def _track_record(run: _Run) -> dict | None:
         return None
     try:
         with np.load(rec) as d:
-            return {k: d[k] for k in RECORD_KEYS if k in d.files}
+            return {k: d[k] for k in RECORD_KEYS + RECORD_COLUMN_KEYS if k in d.files}
     finally:
         rec.unlink()
 
 
 def _release_freed_memory() -> None:
-    """Give the heap pages freed by the track's per-step record back to the system (glibc).
+    """Give the heap pages freed with the track FMU's instance back to the system (glibc).
 
-    The track records its states as one small array per output step (the FMU's copy is
-    freed with its instance, the in-process lists once stacked); glibc keeps freed small
-    blocks in the process, so without this the post-processing's memory would add on top
-    of a record that no longer exists. Measured on the default scenario (FMU backend):
-    resident memory after the run 679 MB -> 458 MB. A no-op where there is no glibc.
+    The FMU's record and model are freed with its instance; glibc may keep freed blocks
+    in the process, so without this the post-processing's memory would add on top of
+    memory that is no longer used (measured when the record was one small array per
+    output step: 679 MB -> 458 MB resident after the run). A no-op where there is no glibc.
     """
     import ctypes
     import ctypes.util

@@ -1,8 +1,9 @@
 """Run a scenario and read its virtual sensors (the simulated side of every comparison).
 
 :func:`simulate_sensors` runs the co-simulation in-process (the same model objects as
-the FMUs; :mod:`orchestrator.cosim.master`), records the track states at the output step and
-reads the layout's sensors from them (:mod:`track.sensors`). :func:`sensors_job` is the
+the FMUs; :mod:`orchestrator.cosim.master`), records the columns of the track states that
+the layout's sensors read (:func:`sensor_columns`) at the output step and reads the
+sensors from them (:func:`read_sensors`, :mod:`track.sensors`). :func:`sensors_job` is the
 top-level (picklable) form that diagnosis sends to worker processes: it takes the
 scenario by value (:class:`orchestrator.cosim.portable.PortableScenario`).
 """
@@ -13,10 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from track.sensors import compile_sensors, sensor_signals
+from track.cosim import state_rows
+from track.sensors import CompiledSensors, compile_sensors, displacement_from_acceleration, sensor_signals
 
 from orchestrator.cosim.portable import PortableScenario
 from orchestrator.inputs.sensor_layout import SensorLayout, layout_of, resolve
+
+SENSOR_BLOCK = 500        # output steps per block of virtual-sensor reading (bounds its temporaries)
+
 
 @dataclass
 class SensorRun:
@@ -37,25 +42,85 @@ class SensorRun:
     error: str | None = None
 
 
+def sensor_columns(model, compiled: CompiledSensors) -> dict:
+    """The columns of the track states that the sensors read (a ``record_columns`` request).
+
+    Strain rows read q, accelerometers a, pressure cells the ballast bushings under them
+    (their sleeper node's q and v).
+
+    Returns
+    -------
+    dict
+        ``{"q": ..., "v": ..., "a": ...}``, sorted column indices (ndarray of int).
+    """
+    bushings = np.flatnonzero(np.any(compiled.Pb != 0.0, axis=0))
+    D = np.unique(model.ballast.dof[bushings])
+    return {"q": np.union1d(np.flatnonzero(np.any(compiled.Cq != 0.0, axis=0)), D), "v": D,
+            "a": np.flatnonzero(np.any(compiled.Ca != 0.0, axis=0))}
+
+
+def read_sensors(model, compiled: CompiledSensors, record: dict, dt: float, highpass: float,
+                 reconstruct: bool = True) -> dict:
+    """The sensors' signals from a track record (all columns, or those of :func:`sensor_columns`).
+
+    Read in blocks of :data:`SENSOR_BLOCK` output steps (full-width rows of a block at a
+    time: ``track.cosim.state_rows``); displacement sensors are then reconstructed from
+    their accelerometer's whole signal (:func:`track.sensors.displacement_from_acceleration`),
+    as :func:`track.sensors.sensor_signals` does in one go.
+
+    Parameters
+    ----------
+    model : TrackModel
+    compiled : track.sensors.CompiledSensors
+    record : dict
+        ``t`` and ``q``, ``v``, ``a`` (``track.cosim.Record.arrays``).
+    dt : float
+        Output step [s].
+    highpass : float
+        Corner of the displacement reconstruction [Hz].
+    reconstruct : bool
+        ``False``: displacement sensors give their accelerometer's signal [m/s^2].
+
+    Returns
+    -------
+    dict
+        Sensor id -> signal (nt,), SI units.
+    """
+    n, nt = model.n, len(record["t"])
+    blocks = []
+    for b in range(0, nt, SENSOR_BLOCK):
+        rows = slice(b, b + SENSOR_BLOCK)
+        q, v, a = (state_rows(record, k, n, rows) for k in ("q", "v", "a"))
+        blocks.append(sensor_signals(model, compiled, q, v, a, dt, highpass, reconstruct=False))
+    out = {}
+    for s in compiled.sensors:
+        sig = np.concatenate([blk[s.id] for blk in blocks]) if blocks else np.empty(0)
+        out[s.id] = displacement_from_acceleration(sig, dt, highpass) \
+            if reconstruct and s.type == "displacement" else sig
+    return out
+
+
 def simulate_sensors(scenario, layout: SensorLayout | None = None, reconstruct: bool = True) -> SensorRun:
     """Co-simulate ``scenario`` in-process and read its sensors at every output step.
 
-    With ``reconstruct=False`` displacement sensors give their accelerometer's signal
+    The track records only what the sensors read (:func:`sensor_columns`).  With
+    ``reconstruct=False`` displacement sensors give their accelerometer's signal
     [m/s^2]: :func:`orchestrator.inverse.objective.compare` and the synthetic measurements
     reconstruct the displacement on the measured time base, the window the
     measurement's own reconstruction used.
     """
     from orchestrator.cosim.master import run_cosim
+    from orchestrator.inputs.track_model import track_model
 
     layout = layout_of(scenario) if layout is None else layout
-    res = run_cosim(scenario, backend="inprocess", record_states=True)
-    model = res.track_model
+    model = track_model(scenario.track)   # the bodies are cached: the run's own build reuses them
     compiled = compile_sensors(model, resolve(layout, model))
+    res = run_cosim(scenario, backend="inprocess", record_states=True,
+                    record_columns=sensor_columns(model, compiled))
     rec = res.track_record
     t = np.asarray(rec["t"], float)
     dt = float(np.median(np.diff(t))) if t.size > 1 else scenario.simulation.output_step
-    sig = sensor_signals(model, compiled, rec["q"], rec["v"], rec["a"], dt,
-                         layout.displacement_highpass, reconstruct)
+    sig = read_sensors(model, compiled, rec, dt, layout.displacement_highpass, reconstruct)
     return SensorRun(t, sig, res.error)
 
 
@@ -81,4 +146,4 @@ def sensors_job(scenario: PortableScenario, reconstruct: bool = False) -> Sensor
     return simulate_sensors(scenario.scenario(), reconstruct=reconstruct)
 
 
-__all__ = ["variant_for_speed", "SensorRun", "simulate_sensors", "sensors_job"]
+__all__ = ["variant_for_speed", "SensorRun", "read_sensors", "sensor_columns", "simulate_sensors", "sensors_job"]

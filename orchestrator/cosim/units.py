@@ -80,7 +80,7 @@ class InProcessTrack:
     """:class:`track.cosim.TrackCosim` stepped directly."""
 
     def __init__(self, scenario, n_wheels: int, h: float, extrapolate: bool, record_every: int,
-                 extrapolate_force: bool):
+                 extrapolate_force: bool, record_columns: dict | None = None, record_rows: int = 0):
         from track.cosim import TrackCosim
         from orchestrator.inputs.track_model import track_model
 
@@ -90,7 +90,8 @@ class InProcessTrack:
         self.engine = TrackCosim(scenario.track, n_wheels, 0.5 * scenario.vehicle.axle_load, h,
                                  speed=scenario.vehicle.speed, extrapolate=extrapolate,
                                  record_every=record_every, model=self.model,
-                                 extrapolate_force=extrapolate_force)
+                                 extrapolate_force=extrapolate_force, record_columns=record_columns)
+        self.engine.record.reserve(record_rows)
 
     def step(self, t: float, h: float, x, z, vz) -> None:
         self.engine.do_step(x, z, vz)
@@ -104,20 +105,8 @@ class InProcessTrack:
         return e.Fz, e.parts, e.rail_w
 
     def record(self) -> dict:
-        """The recorded states as arrays (``track.cosim.Record.arrays``), called once after the run.
-
-        Stacked one field at a time, each list of per-step rows emptied once stacked: the
-        record is held once plus one field, not twice (the rows are not needed again).
-        """
-        import dataclasses
-
-        rec = self.engine.record
-        out = {}
-        for name in [f.name for f in dataclasses.fields(rec)]:
-            rows = getattr(rec, name)
-            out[name] = np.array(rows)
-            rows.clear()
-        return out
+        """The recorded states (``track.cosim.Record.arrays``: views of the preallocated record)."""
+        return self.engine.record.arrays()
 
     def work(self) -> dict:
         """The track's own work: counters of :class:`track.dynamics.Counters` and wall times [s]."""
@@ -185,8 +174,9 @@ class FmuUnit:
         else:
             self.fmu.setString(vr, [str(value)])
 
-    def initialize(self, t0: float) -> None:
-        self.fmu.setupExperiment(startTime=t0)
+    def initialize(self, t0: float, stop_time: float | None = None) -> None:
+        """setupExperiment (start ``t0`` [s], the stop time [s] when given), then initialization mode."""
+        self.fmu.setupExperiment(startTime=t0, stopTime=stop_time)
         self.fmu.enterInitializationMode()
         self.fmu.exitInitializationMode()
 
@@ -267,8 +257,12 @@ class FmuVehicle:
 class FmuTrack:
     """Our track FMU."""
 
+    COUNTERS = ("track_steps", "linear_solves", "contact_iterations", "passes", "factorizations")
+    WALLS = ("wall_statics", "wall_factor")   # [s]
+
     def __init__(self, path: Path, n_wheels: int, params: dict):
         self.unit = FmuUnit(path, "track", params)
+        self._work: dict = {}
         w = range(1, n_wheels + 1)
         self._in = self.unit.real_port([f"wheel{i}_{s}" for s in ("x", "z", "vz") for i in w])
         self._out = self.unit.real_port([f"wheel{i}_{s}" for s in ("Fz", "Fz_rail", "Fz_nose", "rail_z")
@@ -277,8 +271,8 @@ class FmuTrack:
         self.n = n_wheels
         self._inbuf = np.empty(3 * n_wheels)
 
-    def initialize(self, t0: float) -> None:
-        self.unit.initialize(t0)
+    def initialize(self, t0: float, stop_time: float | None = None) -> None:
+        self.unit.initialize(t0, stop_time)
 
     def step(self, t: float, h: float, x, z, vz) -> None:
         n = self.n
@@ -297,10 +291,24 @@ class FmuTrack:
         return o[:n].copy(), np.stack([o[n:2 * n], o[2 * n:3 * n]], axis=1), o[3 * n:].copy()
 
     def work(self) -> dict:
-        """Nothing: the track FMU's counters stay inside it (in-process backend only)."""
-        return {}
+        """The track FMU's work counters and wall times [s] (its monitoring outputs), as read at
+        terminate; empty before (or when the FMU could not be read)."""
+        return dict(self._work)
+
+    def _read_work(self) -> dict:
+        """The FMU's outputs :attr:`COUNTERS` (Integer) and :attr:`WALLS` (Real, [s])."""
+        fmu = self.unit.fmu
+        counters = fmu.getInteger([self.unit.vr(k) for k in self.COUNTERS])
+        walls = fmu.getReal([self.unit.vr(k) for k in self.WALLS])
+        return {**{k: int(v) for k, v in zip(self.COUNTERS, counters)},
+                **{k: float(v) for k, v in zip(self.WALLS, walls)}}
 
     def terminate(self) -> None:
+        """Read the work counters, then terminate and free the FMU."""
+        try:
+            self._work = self._read_work()
+        except Exception:  # noqa: BLE001 - a failed FMU may refuse reads; the counters are then missing
+            self._work = {}
         self.unit.terminate()
 
 

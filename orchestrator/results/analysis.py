@@ -11,6 +11,10 @@
 
 The crossing side is the side whose wheel passes the nose; the *field side* of the
 transition sleeper is the region around the other wheel's rail seat.
+
+All of it reads few columns of the track states (:func:`analysis_columns`: the crossing
+rail's and the transition sleeper's coordinates, the ballast nodes under that sleeper), so
+the run records only those; the record is expanded to full rows a block at a time.
 """
 from __future__ import annotations
 
@@ -18,10 +22,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from track.cosim import state_rows
 from track.model import TrackModel, reference_point
-from track.post import body_response, sleeper_pressure
+from track.post import BodyResponse, body_response, sleeper_pressure
 
 SIDE_WINDOW = 0.3   # m: half-width of the sleeper region under a rail seat for the side pressures
+STATE_BLOCK = 500   # output steps per block of full-width states (bounds the temporaries: 7 MB each)
 
 
 @dataclass
@@ -67,8 +73,47 @@ def side_region(y_p: np.ndarray, y_seat: float) -> np.ndarray:
     return near
 
 
+def analysis_columns(model: TrackModel) -> dict:
+    """The columns of the track states :func:`analyse` reads (a ``record_columns`` request).
+
+    q: the generalized coordinates of the crossing rail and of the transition sleeper
+    (their recovered fields, ``track.post.body_response``) and the sleeper nodes of the
+    ballast bushings under that sleeper (``track.post.sleeper_pressure``); v: those nodes.
+
+    Returns
+    -------
+    dict
+        ``{"q": ..., "v": ...}``, sorted column indices (ndarray of int).
+    """
+    side, x_ref, k_tr = reference_point(model)
+    rail = model.body(model.layout.running_body(side, x_ref))
+    sleeper = model.body(f"sleeper_{k_tr}")
+    D = np.unique(model.ballast.dof[model.ballast.sleeper == k_tr])
+    return {"q": np.union1d(np.union1d(rail.gdofs, sleeper.gdofs), D), "v": D}
+
+
+def _histories(model: TrackModel, rec: dict, rail_name: str, k_tr: int, loads_t: list):
+    """Moment history along the rail (nt, nn), the sleeper's response and its ballast pressures
+    (y [m], p (nt, nb) [Pa]) from the record, a block of :data:`STATE_BLOCK` rows at a time."""
+    n, nt = model.n, len(rec["t"])
+    rail_hist, sl_w, sl_M, p_t = [], [], [], []
+    y_p = sl = None
+    for b in range(0, nt, STATE_BLOCK):
+        rows = slice(b, b + STATE_BLOCK)
+        q, v = state_rows(rec, "q", n, rows), state_rows(rec, "v", n, rows)
+        rail_hist += [body_response(model, rail_name, qi, pts).moment for qi, pts in zip(q, loads_t[rows])]
+        sl = body_response(model, f"sleeper_{k_tr}", q)
+        sl_w.append(sl.w)
+        sl_M.append(sl.moment)
+        y_p, p = sleeper_pressure(model, k_tr, q, v)
+        p_t.append(p)
+    sleeper = BodyResponse(coord=sl.coord, w=np.concatenate(sl_w), moment=np.concatenate(sl_M))
+    return np.array(rail_hist), sleeper, y_p, np.concatenate(p_t)
+
+
 def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
-    """Scalars and arrays of a co-simulation result (needs ``res.track_record``)."""
+    """Scalars and arrays of a co-simulation result (needs ``res.track_record``: all columns of
+    q and v, or at least those of :func:`analysis_columns`)."""
     side, x_ref, k_tr = reference_point(model)
     m = res.Fz.shape[1]
     sides = wheel_sides(m)
@@ -85,12 +130,9 @@ def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
         return out
     lay = model.layout
     rail_name = lay.running_body(side, x_ref)
-    sl_name = f"sleeper_{k_tr}"
     loads_t = [[(model.rail_point(sd, x), -f) for sd, x, f in zip(sides, xs, fz)]
                for xs, fz in zip(rec["x"], rec["Fz"])]
-    rail_hist = np.array([body_response(model, rail_name, q, pts).moment for q, pts in zip(rec["q"], loads_t)])
-    sl = body_response(model, sl_name, rec["q"])
-    y_p, p_t = sleeper_pressure(model, k_tr, rec["q"], rec["v"])
+    rail_hist, sl, y_p, p_t = _histories(model, rec, rail_name, k_tr, loads_t)
     j_r, j_s = int(np.argmax(rail_hist.max(axis=1))), int(np.argmax(sl.moment.max(axis=1)))
     y_cross, y_field = seat_y(model, k_tr, side), seat_y(model, k_tr, "right" if side == "left" else "left")
     near_c, near_f = side_region(y_p, y_cross), side_region(y_p, y_field)
@@ -104,7 +146,7 @@ def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
         "ballast_pressure_crossing_side_at_max_sleeper": float(p_t[j_s, near_c].max()),
         "ballast_pressure_field_side_at_max_sleeper": float(p_t[j_s, near_f].max()),
     })
-    rail_at = body_response(model, rail_name, rec["q"][j_r], loads_t[j_r])
+    rail_at = body_response(model, rail_name, state_rows(rec, "q", model.n, slice(j_r, j_r + 1))[0], loads_t[j_r])
     a = out.arrays
     a.update({
         "rail_x": rail_at.coord, "rail_w_at_max": rail_at.w, "rail_M_at_max": rail_at.moment,

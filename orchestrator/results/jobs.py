@@ -19,15 +19,17 @@ from orchestrator.inputs.track_model import track_model
 from track.statics import static_equilibrium
 from track.timegrid import step_count
 
+from orchestrator.cosim.master import merge_columns
+from orchestrator.cosim.sensing import read_sensors, sensor_columns
 from orchestrator.results import plots
-from orchestrator.results.analysis import analyse
+from orchestrator.results.outdir import prepare_out_dir
+from orchestrator.results.analysis import analyse, analysis_columns
 from track.model import reference_point
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.results.plots_layout import plot_layout
 
 FRF_POINTS = 400          # frequencies of a receptance curve
 FRF_FMIN = 5.0            # Hz
-SENSOR_BLOCK = 500        # output steps per block of virtual-sensor reading (bounds its temporaries)
 STATE_KEYS = ("t", "q", "v", "a")   # what --save-states writes of the track record
 # results.h5 outputs: gzip level 1 with byte shuffle. Measured on the default scenario's outputs
 # (8.1 MB raw): lzf+shuffle 6.9 MB, gzip-1+shuffle 6.6 MB, gzip-4+shuffle 6.6 MB, gzip-4 alone 7.4 MB;
@@ -55,8 +57,11 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
                  save_states: bool = False) -> dict:
     """Co-simulation of ``scenario``; writes sensors.csv, results.h5, summary.json and plots.
 
-    The recorded track states are post-processed in memory (virtual sensors in blocks of
-    :data:`SENSOR_BLOCK` output steps, moment envelopes and ballast pressure by
+    The track records only the columns of its states that the post-processing reads
+    (:func:`orchestrator.results.analysis.analysis_columns`,
+    :func:`orchestrator.cosim.sensing.sensor_columns`; all of them with ``save_states``);
+    they are post-processed in memory (virtual sensors by
+    :func:`orchestrator.cosim.sensing.read_sensors`, moment envelopes and ballast pressure by
     :func:`orchestrator.results.analysis.analyse`) and then dropped: ``results.h5`` holds
     them (``track/q``, ``v``, ``a``) only with ``save_states``. The track FMU's record file
     never stays on disk (:func:`orchestrator.cosim.master.run_cosim`).
@@ -66,13 +71,14 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     :class:`UserInputError` names the cause.
     """
     t_start = time.perf_counter()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    res = _cosimulate(scenario, out_dir, progress, backend)
+    out_dir = prepare_out_dir(out_dir)   # warns when it held an earlier run's results
+    model = track_model(scenario.track)   # the model the run builds (its bodies cached) for the post-processing
+    compiled = _compiled_sensors(scenario, model)
+    columns = None if save_states else merge_columns(analysis_columns(model), sensor_columns(model, compiled))
+    res = _cosimulate(scenario, out_dir, progress, backend, columns)
     t_post = time.perf_counter()
-    model = res.track_model if res.track_model is not None else track_model(scenario.track)  # cached bodies
     summary = _run_summary(scenario, backend, model, res)
-    sensors = _virtual_sensors(scenario, model, res)
+    sensors = _virtual_sensors(scenario, model, compiled, res)
     Q0 = 0.5 * scenario.vehicle.axle_load
     summary["contact"] = _contact_summary(res, Q0)
     an = analyse(model, Q0, res)
@@ -101,15 +107,17 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     return summary
 
 
-def _cosimulate(scenario, out_dir: Path, progress: bool, backend: str):
-    """Run the co-simulation (built FMUs in ``out_dir/work/fmus``), with a progress bar; returns its result."""
+def _cosimulate(scenario, out_dir: Path, progress: bool, backend: str, record_columns: dict | None = None):
+    """Run the co-simulation (work folder ``out_dir/work``), recording ``record_columns`` of the track
+    states (``None``: all), with a progress bar; returns its result."""
     from orchestrator.cosim.master import run_cosim
 
     sim = scenario.simulation
     nsteps = step_count(sim.duration, sim.step)
     update, close = _progress_bar(progress, nsteps, "co-simulation")
     try:
-        return run_cosim(scenario, backend=backend, work_dir=out_dir / "work", progress=update)
+        return run_cosim(scenario, backend=backend, work_dir=out_dir / "work", progress=update,
+                         record_columns=record_columns)
     finally:
         close()
 
@@ -185,37 +193,25 @@ def _plot_signals(out_dir: Path, scenario, lay, res) -> None:
                                       f"{scenario.name}: wheel and rail displacement"), out_dir / "displacements.png")
 
 
-def _virtual_sensors(scenario, model, res) -> dict:
-    """The sensor layout's signals (DESIGN.md §4.3) at the output times; {} without a track record.
+def _compiled_sensors(scenario, model):
+    """The scenario's sensor layout (DESIGN.md §4.3) compiled on ``model`` (none on a track it does not fit)."""
+    from track.sensors import compile_sensors
 
-    Read in blocks of :data:`SENSOR_BLOCK` output steps (the ballast pressures of a whole
-    record are not materialised at once); displacement sensors are reconstructed from
-    their accelerometer's whole signal afterwards, as :func:`track.sensors.sensor_signals`
-    does in one go.
-    """
-    from track.sensors import compile_sensors, displacement_from_acceleration, sensor_signals
+    from orchestrator.inputs.sensor_layout import scenario_sensors
 
-    from orchestrator.inputs.sensor_layout import layout_of, scenario_sensors
+    return compile_sensors(model, scenario_sensors(scenario, model))
+
+
+def _virtual_sensors(scenario, model, compiled, res) -> dict:
+    """The sensors' signals at the output times (:func:`orchestrator.cosim.sensing.read_sensors`);
+    {} without sensors or a track record."""
+    from orchestrator.inputs.sensor_layout import layout_of
 
     rec = res.track_record
-    if rec is None or "a" not in rec or len(rec["t"]) < 2 or len(rec["t"]) != len(res.t):
+    if not compiled.sensors or rec is None or "a" not in rec or len(rec["t"]) < 2 or len(rec["t"]) != len(res.t):
         return {}
-    sensors = scenario_sensors(scenario, model)
-    if not sensors:
-        return {}
-    layout = layout_of(scenario)
-    compiled = compile_sensors(model, sensors)
     dt = float(np.median(np.diff(rec["t"])))
-    nt = len(rec["t"])
-    blocks = [sensor_signals(model, compiled, rec["q"][b:b + SENSOR_BLOCK], rec["v"][b:b + SENSOR_BLOCK],
-                             rec["a"][b:b + SENSOR_BLOCK], dt, layout.displacement_highpass, reconstruct=False)
-              for b in range(0, nt, SENSOR_BLOCK)]
-    out = {}
-    for s in compiled.sensors:
-        sig = np.concatenate([blk[s.id] for blk in blocks])
-        out[s.id] = displacement_from_acceleration(sig, dt, layout.displacement_highpass) \
-            if s.type == "displacement" else sig
-    return out
+    return read_sensors(model, compiled, rec, dt, layout_of(scenario).displacement_highpass)
 
 
 def _write_signals(out_dir: Path, res, sensors: dict) -> None:

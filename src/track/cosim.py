@@ -20,7 +20,6 @@ coupled run without a drop transient.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -39,20 +38,144 @@ class DivergenceError(RuntimeError):
     """The coupled solution blew up (one line, names the time and the step)."""
 
 
-@dataclass
-class Record:
-    """Recorded track states at the output times."""
+STATE_FIELDS = ("q", "v", "a")   # the recordable track states: displacements, velocities, accelerations
+RECORD_FIRST_ROWS = 256          # rows of a record whose length is not reserved; it doubles when full
 
-    t: list = field(default_factory=list)
-    q: list = field(default_factory=list)
-    v: list = field(default_factory=list)
-    a: list = field(default_factory=list)
-    x: list = field(default_factory=list)
-    Fz: list = field(default_factory=list)
-    parts: list = field(default_factory=list)
+
+class Record:
+    """Track states at the output times, in preallocated arrays written in place.
+
+    One row per recorded time: ``t`` [s], the states of :data:`STATE_FIELDS` (all n
+    columns, or only the columns asked for), the wheels' ``x`` [m], ``Fz`` [N] and
+    ``parts`` [N].  The arrays hold :meth:`reserve`'s rows (or :data:`RECORD_FIRST_ROWS`)
+    and double when full, so a run whose output count is known writes every row once
+    and never copies the record; memory not yet written is not resident.
+
+    Parameters
+    ----------
+    n_dofs : int
+        Generalized coordinates of the track model.
+    n_wheels : int
+    columns : dict, optional
+        State field -> indices of the columns to record (any order, unique), or ``None``
+        for all n; a field not in the dict is not recorded.  Default: all of q, v, a.
+
+    Raises
+    ------
+    ValueError
+        An unknown field or a column outside ``0 .. n_dofs - 1``.
+    """
+
+    def __init__(self, n_dofs: int, n_wheels: int, columns: dict | None = None):
+        columns = dict.fromkeys(STATE_FIELDS) if columns is None else dict(columns)
+        unknown = set(columns) - set(STATE_FIELDS)
+        if unknown:
+            raise ValueError(f"record columns: unknown field(s) {sorted(unknown)}; known: {list(STATE_FIELDS)}")
+        self.n_dofs, self.n_wheels = int(n_dofs), int(n_wheels)
+        self.columns: dict = {}
+        for name in STATE_FIELDS:
+            if name not in columns:
+                continue
+            cols = columns[name]
+            if cols is not None:
+                cols = np.unique(np.asarray(cols, dtype=np.intp))
+                if cols.size and (cols[0] < 0 or cols[-1] >= self.n_dofs):
+                    raise ValueError(f"record columns of {name}: indices must lie in 0..{self.n_dofs - 1}")
+            self.columns[name] = cols
+        self.n = 0
+        self._data: dict = {}
+        self._allocate(RECORD_FIRST_ROWS)
+
+    def _shape(self, name: str, rows: int) -> tuple:
+        m = self.n_wheels
+        if name in STATE_FIELDS:
+            cols = self.columns[name]
+            return rows, self.n_dofs if cols is None else cols.size
+        return {"t": (rows,), "x": (rows, m), "Fz": (rows, m), "parts": (rows, m, 2)}[name]
+
+    def _allocate(self, rows: int) -> None:
+        """Arrays of ``rows`` rows holding the first ``n`` rows of the current ones."""
+        data = {}
+        for name in ("t", *self.columns, "x", "Fz", "parts"):
+            data[name] = np.empty(self._shape(name, rows))
+            if self.n:
+                data[name][:self.n] = self._data[name][:self.n]
+        self._data = data
+
+    @property
+    def capacity(self) -> int:
+        """Rows the arrays hold before they grow."""
+        return self._data["t"].shape[0]
+
+    def __len__(self) -> int:
+        return self.n
+
+    def reserve(self, rows: int) -> None:
+        """Hold at least ``rows`` rows without growing (the run's number of output times)."""
+        if rows > self.capacity:
+            self._allocate(int(rows))
+
+    def append(self, t: float, q: np.ndarray, v: np.ndarray, a: np.ndarray, x: np.ndarray, Fz: np.ndarray,
+               parts: np.ndarray) -> None:
+        """Write one row: time [s], states (n,), wheel x [m], Fz [N], parts (m, 2) [N]."""
+        if self.n == self.capacity:
+            self._allocate(2 * self.capacity)
+        d, j = self._data, self.n
+        for name, value in zip(STATE_FIELDS, (q, v, a)):
+            if name in self.columns:
+                cols = self.columns[name]
+                if cols is None:
+                    d[name][j] = value
+                else:
+                    np.take(value, cols, out=d[name][j])
+        d["t"][j], d["x"][j], d["Fz"][j], d["parts"][j] = t, x, Fz, parts
+        self.n = j + 1
+
+    def truncate(self, n: int) -> None:
+        """Forget the rows from ``n`` on (an FMU state restored to an earlier time)."""
+        self.n = min(self.n, int(n))
 
     def arrays(self) -> dict:
-        return {k: np.array(getattr(self, k)) for k in ("t", "q", "v", "a", "x", "Fz", "parts")}
+        """The recorded rows as arrays (views, no copy): ``t`` (nt,), each recorded state field
+        (nt, k) with, when only some columns are recorded, ``<field>_columns`` (k,), ``x``,
+        ``Fz`` (nt, m) and ``parts`` (nt, m, 2).  :func:`state_rows` gives full-width rows."""
+        out = {name: arr[:self.n] for name, arr in self._data.items()}
+        for name, cols in self.columns.items():
+            if cols is not None:
+                out[f"{name}_columns"] = cols
+        return out
+
+
+def state_rows(record: dict, name: str, n_dofs: int, rows: slice = slice(None)) -> np.ndarray:
+    """Rows of a recorded state field at full width, shape (nr, n_dofs).
+
+    The inverse of a column selection of :class:`Record`: a field recorded in all
+    columns is returned as a view; one recorded in some columns (``<name>_columns`` in
+    ``record``) is scattered into zeros, so a quantity that reads only recorded columns
+    comes out exactly as from the full state.  Take a block of rows at a time.
+
+    Parameters
+    ----------
+    record : dict
+        :meth:`Record.arrays` (or the same arrays read back from a file).
+    name : str
+        ``"q"``, ``"v"`` or ``"a"``.
+    n_dofs : int
+    rows : slice
+        Which rows.
+
+    Raises
+    ------
+    KeyError
+        The field was not recorded.
+    """
+    values = record[name][rows]
+    cols = record.get(f"{name}_columns")
+    if cols is None:
+        return values
+    full = np.zeros((values.shape[0], n_dofs))
+    full[:, np.asarray(cols, np.intp)] = values
+    return full
 
 
 def wheel_sides(n_wheels: int) -> list[str]:
@@ -87,6 +210,9 @@ class TrackCosim:
         from 1.5 % to 0.3 % at a 100 us step (tests/test_cosim.py).
     record_every : int
         Record the state every this many steps (0: never).
+    record_columns : dict, optional
+        What to record of the states (:class:`Record`'s ``columns``): default all columns
+        of q, v and a.  Reserve the rows with ``self.record.reserve``.
     model : TrackModel, optional
         A prebuilt model of ``params``.
     kernel : bool, optional
@@ -99,7 +225,7 @@ class TrackCosim:
                  extrapolate: bool = False, auto_offset: bool = True, record_every: int = 0,
                  extrapolate_force: bool = False,
                  model: TrackModel | None = None, alpha: float = ALPHA_DEFAULT, c_h: float = HERTZ_CONSTANT,
-                 kernel: bool | None = None):
+                 kernel: bool | None = None, record_columns: dict | None = None):
         self.params = params
         self.kernel = kernel_enabled(kernel)
         self._compiled: CompiledContacts | None = None
@@ -131,21 +257,24 @@ class TrackCosim:
         self._Fz_last = self.Q0.copy()
         self.parts = np.zeros((self.n, 2))  # force on first / second surface [N]
         self.rail_w = np.zeros(self.n)      # rail deflection under each wheel [m]
-        self.record = Record()
+        self.record = Record(self.model.n, self.n, record_columns)
         self._limit = DIVERGENCE_FACTOR * self.Q0
         self.wall_statics = 0.0             # wall time of the static equilibrium at initialization [s]
         self.wall_factor = 0.0              # ... and of the integrator's set-up (step-matrix LU) [s]
 
     # ------------------------------------------------------------------ geometry
-    def surfaces(self, i: int, x: float, body: str) -> tuple[float, float]:
-        """Surface heights under wheel i at x on ``body`` [m]."""
-        side = self.sides[i]
+    def surface_geometry(self, side: str, body: str):
+        """The geometry (``heights(x) -> (z1, z2)`` [m]) under a wheel on ``side`` running on ``body``."""
         if self.crossing is not None and side == self.model.layout.crossing_side and \
                 self.model.body(body).kind == "crossing":
-            return self.crossing.heights(x)
+            return self.crossing
         if self.joint is not None:
-            return self.joint.heights(x)
-        return FLAT.heights(x)
+            return self.joint
+        return FLAT
+
+    def surfaces(self, i: int, x: float, body: str) -> tuple[float, float]:
+        """Surface heights under wheel i at x on ``body`` [m]."""
+        return self.surface_geometry(self.sides[i], body).heights(x)
 
     def _points(self, x: np.ndarray):
         pts, surf = [], []
@@ -227,19 +356,12 @@ class TrackCosim:
         return self.Fz
 
     def _attach_kernel(self) -> None:
-        self._compiled = CompiledContacts(self.integ, self.sides, self.surfaces) if self.kernel else None
+        self._compiled = CompiledContacts(self.integ, self.sides, self.surface_geometry) if self.kernel else None
 
     def _record(self, x: np.ndarray) -> None:
-        if not self.record_every:
-            return
-        r = self.record
-        r.t.append(self.integ.t)
-        r.q.append(self.integ.q.copy())
-        r.v.append(self.integ.v.copy())
-        r.a.append(self.integ.a.copy())
-        r.x.append(np.array(x, float))
-        r.Fz.append(self.Fz.copy())
-        r.parts.append(self.parts.copy())
+        if self.record_every:
+            i = self.integ
+            self.record.append(i.t, i.q, i.v, i.a, x, self.Fz, self.parts)
 
     # ------------------------------------------------------------------ state
     def get_state(self) -> dict:
@@ -248,7 +370,7 @@ class TrackCosim:
                 "offset": self.offset.copy(), "z_static": self.z_static.copy(), "Fz": self.Fz.copy(),
                 "Fz_coupling": self.Fz_coupling.copy(), "Fz_last": self._Fz_last.copy(),
                 "parts": self.parts.copy(), "rail_w": self.rail_w.copy(),
-                "record_len": len(self.record.t)}
+                "record_len": len(self.record)}
 
     def set_state(self, s: dict) -> None:
         if s["integ"] is None:
@@ -261,6 +383,4 @@ class TrackCosim:
         self.offset, self.z_static = s["offset"].copy(), s["z_static"].copy()
         self.Fz, self.parts, self.rail_w = s["Fz"].copy(), s["parts"].copy(), s["rail_w"].copy()
         self.Fz_coupling, self._Fz_last = s["Fz_coupling"].copy(), s["Fz_last"].copy()
-        n = s["record_len"]
-        for k in ("t", "q", "v", "a", "x", "Fz", "parts"):
-            del getattr(self.record, k)[n:]
+        self.record.truncate(s["record_len"])
