@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any, Dict
 from xml.etree import ElementTree as ET
 
-from orchestrator.cosim.ssp.ssd import NS, OSP_ANNOTATION, SSD_FILE, Connection, SspSystem
+from orchestrator.cosim.ssp.ssd import NS, OMS_ANNOTATION, OSP_ANNOTATION, SSD_FILE, Connection, SspSystem
 
 
 def _parse_value(el: ET.Element) -> tuple[str, Any]:
@@ -30,6 +30,20 @@ def _read_parameter_set(el: ET.Element) -> Dict[str, Any]:
         value_el = next(iter(p))
         out[p.get("name")] = _parse_value(value_el)[1]
     return out
+
+
+def _step_size(experiment: ET.Element | None, system: ET.Element) -> float | None:
+    """The communication step [s]: libcosim's (OSP) annotation of the default experiment,
+    else OMSimulator's fixed-step master of the system; None if neither is there."""
+    for ann in experiment.findall("ssd:Annotations/ssc:Annotation", NS) if experiment is not None else ():
+        fs = ann.find("osp:Algorithm/osp:FixedStepAlgorithm", NS)
+        if ann.get("type") == OSP_ANNOTATION and fs is not None:
+            return float(fs.get("baseStepSize"))
+    for ann in system.findall("ssd:Annotations/ssc:Annotation", NS):
+        fs = ann.find("oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster", NS)
+        if ann.get("type") == OMS_ANNOTATION and fs is not None and fs.get("stepSize"):
+            return float(fs.get("stepSize"))
+    return None
 
 
 def read_ssp(ssp_file: Path) -> SspSystem:
@@ -61,15 +75,11 @@ def read_ssp(ssp_file: Path) -> SspSystem:
             connections.append(Connection(c.get("startElement"), c.get("startConnector"),
                                           c.get("endElement"), c.get("endConnector"), factor))
         exp = root.find("ssd:DefaultExperiment", NS)
-        start = stop = step = None
+        start = stop = None
         if exp is not None:
             start = float(exp.get("startTime")) if exp.get("startTime") else None
             stop = float(exp.get("stopTime")) if exp.get("stopTime") else None
-            for ann in exp.findall("ssd:Annotations/ssc:Annotation", NS):
-                if ann.get("type") == OSP_ANNOTATION:
-                    fs = ann.find("osp:Algorithm/osp:FixedStepAlgorithm", NS)
-                    if fs is not None:
-                        step = float(fs.get("baseStepSize"))
+        step = _step_size(exp, system)
     return SspSystem(root.get("name"), sources, params, connectors, tuple(connections), start, stop, step)
 
 

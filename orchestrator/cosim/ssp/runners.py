@@ -49,19 +49,32 @@ libcosim (Open Simulation Platform) through ``libcosimpy``
 FMPy (``fmpy.ssp``)
 -------------------
 ``fmpy.ssp.ssd.read_ssd`` reads and schema-validates the file (SSP 1.0 schemas bundled
-with FMPy). ``fmpy.ssp.simulation.simulate_ssp`` (FMPy 0.3.x) is not usable for this
-system: it ignores the SSD's parameter bindings (only an explicit ``parameter_set``
-argument is applied, and Booleans are set as ``value != 0.0``, so ``"false"`` becomes
-true), ignores ``ssc:LinearTransformation`` (it looks for ``ssd:LinearTransformation``
-and never applies it), starts every connected input at 0.0 (the vehicle's first step
-sees no contact force, the track's sees every wheel at x = 0), skips the initialization-
-mode exchange, ignores the OSP step size (default: stop time / 100) and steps while
-``time < stop`` with accumulated ``time += h``. Run on the exported plain-track system
-(``simulate_ssp(file, stop_time=0.002, step_size=2e-5)``) it starts the bogie at x = 0
-instead of its ``x0`` (the rear wheelset off the panel) and the contact force grows to
-2.1 times the static load within the 100 steps. :func:`run_ssp_fmpy` therefore uses
-``read_ssd`` for parsing only and runs its own fixed-step Jacobi master with libcosim's
-semantics (above) on ``fmpy.fmi2.FMU2Slave`` instances.
+with FMPy). ``fmpy.ssp.simulation.simulate_ssp`` (FMPy 0.3.32, read from its source):
+
+* parameter bindings: read but not applied; only its ``parameter_set`` argument is (names
+  ``component.variable``, Booleans set as ``value != 0.0``, so ``"false"`` becomes true).
+  Harmless for our FMUs: :func:`orchestrator.cosim.ssp.system.export_ssp` builds them
+  with the scenario's values as their start values, the bindings repeat them;
+* ``ssc:LinearTransformation``: never applied (its reader looks for
+  ``ssd:LinearTransformation``, and the loop copies values unchanged); our own vehicles
+  need none, a third-party vehicle with sign flips does;
+* the communication step: its ``step_size`` argument (default ``stop_time / 100``), the
+  annotations are not read; time advances as ``time += h`` while ``time < stop_time``;
+* initialization: every connector is set to ``0.0``, the FMUs are initialized without
+  any exchange, and the connections are applied only after all FMUs have stepped. Over
+  the first step every connected input is therefore ``0.0``, whatever the start values
+  or the outputs at t = 0: the vehicle gets no contact force, the track gets every wheel
+  at x = 0, z = 0. The track puts itself in static equilibrium under the wheels at its
+  first step, at the wheels' input positions, so this is not a start-up transient but a
+  wrong state: on the turnout (first sleeper at x = 34.5 m) the track discards the step
+  (``wheel1_x = 0.0000 m is outside the modelled panel``), on a plain track starting at
+  x = 0 the four static loads land on the first sleeper and the next step diverges
+  (contact force 1.1e7 N on wheel 4 at t = 2 h). No content of the SSP file changes
+  that: ``simulate_ssp`` cannot run this system.
+
+:func:`run_ssp_fmpy` therefore uses ``read_ssd`` for parsing only and runs its own
+fixed-step Jacobi master with libcosim's semantics (above) on ``fmpy.fmi2.FMU2Slave``
+instances.
 """
 from __future__ import annotations
 
@@ -83,6 +96,21 @@ def _n_steps(step: float, duration: float) -> int:
     if not (step > 0 and duration > 0):
         raise ValueError(f"step and duration must be positive, got {step}, {duration}")
     return step_count(duration, step, cover=True)
+
+
+def _host_pythonfmu() -> None:
+    """Import this interpreter's pythonfmu (if installed) before an FMU is loaded in-process.
+
+    A pythonfmu FMU bundles a copy of pythonfmu in its ``resources/`` and puts that folder
+    first on ``sys.path``; if nothing imported pythonfmu before, the FMU's copy becomes
+    ``sys.modules["pythonfmu"]``, and an FMU built later in the same process (its builder
+    takes the FMI binaries from next to that copy, in a folder the host has deleted by then)
+    comes out without ``binaries/``.
+    """
+    try:
+        import pythonfmu.builder  # noqa: F401
+    except ImportError:
+        pass
 
 
 def _split(name: str) -> tuple[str, str]:
@@ -154,6 +182,7 @@ def _libcosim_execution(ssp_file: Path, ns: int):
     from libcosimpy.CosimObserver import CosimObserver
     from libcosimpy._internal import get_last_error_message
 
+    _host_pythonfmu()
     try:
         execution = CosimExecution.from_ssp_file(str(Path(ssp_file).resolve()), ns)
     except AssertionError:
@@ -216,6 +245,7 @@ class _FmpyMaster:
         from fmpy.ssp.ssd import read_ssd
 
         read_ssd(str(ssp_file), validate=True)  # FMPy's reader + SSP 1.0 schema check
+        _host_pythonfmu()
         self.system = read_ssp(ssp_file)
         with zipfile.ZipFile(ssp_file) as zf:
             zf.extractall(unzip_dir)

@@ -17,8 +17,10 @@ NS = {
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
     "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
     "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+    "oms": "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd",
 }
-OSP_ANNOTATION = "com.opensimulationplatform"
+OSP_ANNOTATION = "com.opensimulationplatform"   # libcosim's: the step of its fixed-step algorithm
+OMS_ANNOTATION = "org.openmodelica"             # OMSimulator's: the system's kind and master algorithm
 VEHICLE, TRACK = "vehicle", "track"
 NS_PER_S = 1_000_000_000
 
@@ -67,7 +69,7 @@ class SspSystem:
     start_time, stop_time : float or None
         ``ssd:DefaultExperiment``.
     step_size : float or None
-        The OSP ``baseStepSize`` annotation.
+        The OSP ``baseStepSize`` annotation, else OMSimulator's ``FixedStepMaster`` ``stepSize``.
     """
 
     name: str
@@ -78,7 +80,6 @@ class SspSystem:
     start_time: float | None
     stop_time: float | None
     step_size: float | None
-
 
 
 def qname(prefix: str, tag: str) -> str:
@@ -94,5 +95,5 @@ def step_ns(step: float) -> int:
     return int(ns)
 
 
-__all__ = ["SSD_FILE", "NS", "OSP_ANNOTATION", "VEHICLE", "TRACK", "NS_PER_S", "Connection", "Component",
-           "SspSystem", "qname", "step_ns"]
+__all__ = ["SSD_FILE", "NS", "OSP_ANNOTATION", "OMS_ANNOTATION", "VEHICLE", "TRACK", "NS_PER_S", "Connection",
+           "Component", "SspSystem", "qname", "step_ns"]

@@ -36,15 +36,26 @@ Parameter values:
   are its own parameters, e.g. ``{"v": 33.333, "s0": 4.1}``; the track's ``speed`` is
   the scenario's ``vehicle.speed``).
 
+The FMUs carry the same values as their start values, so a host that ignores parameter
+bindings (FMPy's ``simulate_ssp``) still runs the scenario: the track FMU is built with
+the scenario's track and its run parameters' values as defaults, our vehicle FMU with
+all of its values above (``resources/start_values.json``, :mod:`fmus.base`). A
+third-party vehicle FMU is taken as it is: its ``vehicle.start_values`` arrive only
+through the binding.
+
 With our vehicles the run must keep the wheels on the modelled panel over
 ``simulation.duration`` (the check of ``turnout run``, :func:`orchestrator.cosim.passage.check_passage`);
 otherwise :class:`UserInputError`. A third-party vehicle's start position is its own
 parameter and is not checked.
 
-Default experiment: start 0, stop ``simulation.duration``, and the communication
-step ``simulation.step`` in the OSP annotation that libcosim reads
+Default experiment: start 0, stop ``simulation.duration``; the communication step
+``simulation.step`` (SSP 1.0 itself has no step size) in the annotations of the two
+hosts that read one (:func:`orchestrator.cosim.ssp.writer.write_ssp`): libcosim's
 (``ssd:DefaultExperiment/ssd:Annotations/ssc:Annotation[type="com.opensimulationplatform"]
-/osp:Algorithm/osp:FixedStepAlgorithm@baseStepSize``); SSP 1.0 itself has no step size.
+/osp:Algorithm/osp:FixedStepAlgorithm@baseStepSize``) and OMSimulator's, which also makes
+the system a co-simulation with a fixed-step master
+(``ssd:System/ssd:Annotations/ssc:Annotation[type="org.openmodelica"]/oms:Annotations
+/oms:SimulationInformation/oms:FixedStepMaster@stepSize``).
 """
 from __future__ import annotations
 
@@ -57,7 +68,7 @@ from pathlib import Path
 from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.cosim import passage
 from orchestrator.cosim.ssp.ssd import TRACK, VEHICLE, Component, Connection, step_ns
-from orchestrator.cosim.ports import check_vehicle_fmu
+from orchestrator.cosim.ports import check_start_values, check_vehicle_fmu
 from orchestrator.cosim.ssp.writer import check_out_file, model_variables, write_ssp
 from orchestrator.inputs.errors import UserInputError
 
@@ -126,6 +137,9 @@ def track_parameters(scenario) -> dict:
     return values
 
 
+OWN_VEHICLE_PARAMETERS = ("speed", "axle_load", "x0")   # our vehicles' parameters the scenario always sets
+
+
 def vehicle_parameters(scenario) -> dict:
     """Parameter values of the vehicle component (see the module docstring)."""
     veh, sim = scenario.vehicle, scenario.simulation
@@ -134,7 +148,7 @@ def vehicle_parameters(scenario) -> dict:
         return start_values
     x0 = float(sim.x_start) if sim.x_start is not None else default_x_start(scenario)
     values = {"speed": float(veh.speed), "axle_load": float(veh.axle_load), "x0": x0}
-    for key in ("speed", "axle_load", "x0"):
+    for key in OWN_VEHICLE_PARAMETERS:
         given = start_values.get(key, values[key])
         if isinstance(given, bool) or not isinstance(given, (int, float)) or float(given) != values[key]:
             where = {"speed": "vehicle.speed", "axle_load": "vehicle.axle_load", "x0": "simulation.x_start"}[key]
@@ -144,46 +158,86 @@ def vehicle_parameters(scenario) -> dict:
     return values
 
 
-TRACK_RESOURCE = "resources/track_fmu.json"  # the track FMU's baked parameters (fmus.track_fmu)
+TRACK_RESOURCE = "resources/track_fmu.json"          # the track FMU's baked parameters (fmus.track_fmu)
+START_VALUES_RESOURCE = "resources/start_values.json"  # a vehicle FMU's baked start values (fmus.base)
 
 
-def _track_fmu_matches(fmu: Path, track_params, n_wheels: int) -> bool:
-    """True when ``fmu`` is a track FMU baked from ``track_params`` for ``n_wheels`` wheels."""
+def _baked(fmu: Path, member: str):
+    """The JSON resource ``member`` of ``fmu``; None if the file or the member is missing or unreadable."""
     try:
         with zipfile.ZipFile(fmu) as zf:
-            baked = json.loads(zf.read(TRACK_RESOURCE))
+            return json.loads(zf.read(member))
     except (OSError, KeyError, ValueError, zipfile.BadZipFile):
+        return None
+
+
+def _as_json(value):
+    """``value`` as it reads back from JSON (tuples become lists, ...), to compare with a baked resource."""
+    return json.loads(json.dumps(value))
+
+
+def _track_fmu_matches(fmu: Path, track_params, n_wheels: int, defaults: dict) -> bool:
+    """True when ``fmu`` is a track FMU baked from ``track_params`` for ``n_wheels`` wheels, with
+    ``defaults`` as the start values of its run parameters."""
+    baked = _baked(fmu, TRACK_RESOURCE)
+    if not isinstance(baked, dict):
         return False
-    wanted = json.loads(json.dumps(dataclasses.asdict(track_params)))
-    return baked.get("n_wheels") == n_wheels and baked.get("track") == wanted
+    return (baked.get("n_wheels") == n_wheels and baked.get("track") == _as_json(dataclasses.asdict(track_params))
+            and all(baked.get("defaults", {}).get(k) == v for k, v in _as_json(defaults).items()))
 
 
 def _track_fmu(scenario, n_wheels: int, fmu_dir: Path | None, tmp: Path) -> Path:
-    """The scenario's track FMU: the one in ``fmu_dir`` if it matches, else built (into ``fmu_dir`` or ``tmp``)."""
-    if fmu_dir is not None and _track_fmu_matches(Path(fmu_dir) / "track.fmu", scenario.track, n_wheels):
+    """The scenario's track FMU, its run parameters' start values the scenario's
+    (:data:`RUN_PARAMETERS`): the one in ``fmu_dir`` if it matches, else built (into ``fmu_dir`` or ``tmp``)."""
+    values = track_parameters(scenario)
+    defaults = {k: values[k] for k in RUN_PARAMETERS}
+    if fmu_dir is not None and _track_fmu_matches(Path(fmu_dir) / "track.fmu", scenario.track, n_wheels, defaults):
         return Path(fmu_dir) / "track.fmu"
     from fmus.build import build_track_fmu
 
-    values = track_parameters(scenario)
-    defaults = {k: values[k] for k in RUN_PARAMETERS}
+    sim = scenario.simulation
     return Path(build_track_fmu(scenario.track, n_wheels, Path(fmu_dir) if fmu_dir is not None else tmp,
-                                **defaults))
+                                stop_time=float(sim.duration), step_size=float(sim.step), **defaults))
 
 
-def _vehicle_fmu(scenario, fmu_dir: Path | None, tmp: Path) -> Path:
-    """The vehicle FMU: the third-party file, ours from ``fmu_dir``, or ours built into
-    ``fmu_dir`` (or ``tmp``)."""
+def _vehicle_fmu(scenario, values: dict, fmu_dir: Path | None, tmp: Path) -> Path:
+    """The vehicle FMU: the third-party file, or ours with ``values`` (:func:`vehicle_parameters`)
+    as its start values: from ``fmu_dir`` if its baked start values are ``values``, else built
+    (into ``fmu_dir`` or ``tmp``).
+
+    Our vehicle's ``x0``, ``speed`` and ``axle_load`` are always its parameters; the
+    scenario's other ``vehicle.start_values`` are checked against the FMU's variables
+    (:class:`UserInputError`) before they are baked in (against an FMU of this kind
+    already in the folder, else against one built with the own values first).
+    """
     kind = scenario.vehicle.fmu
     if not scenario.vehicle.builtin:
         path = Path(kind)
         if not path.is_file():
             raise UserInputError(f"vehicle.fmu: {kind}: file not found")
         return path
-    if fmu_dir is not None and (Path(fmu_dir) / f"{kind}.fmu").is_file():
-        return Path(fmu_dir) / f"{kind}.fmu"
     from fmus.build import build_fmu
 
-    return Path(build_fmu(kind, Path(fmu_dir) if fmu_dir is not None else tmp))
+    sim = scenario.simulation
+    out_dir = Path(fmu_dir) if fmu_dir is not None else tmp
+    path = out_dir / f"{kind}.fmu"
+    if _baked(path, START_VALUES_RESOURCE) == _as_json(values):
+        return path
+    own = {k: values[k] for k in OWN_VEHICLE_PARAMETERS}
+
+    def build(start_values: dict) -> Path:
+        return Path(build_fmu(kind, out_dir, stop_time=float(sim.duration), step_size=float(sim.step),
+                              start_values=start_values))
+
+    if own == values:
+        return build(own)
+    # extra start values: check them against the FMU's variables (the same in every FMU of
+    # this kind) before they are baked in; the FMU bakes parameters only (an input's start
+    # value arrives through the binding alone)
+    variables = model_variables(path if path.is_file() else build(own))
+    check_start_values(variables, scenario.vehicle.start_values, f"the {kind} FMU")
+    baked = {k: v for k, v in values.items() if variables[k].causality == "parameter"}
+    return build(baked) if _baked(path, START_VALUES_RESOURCE) != _as_json(baked) else path
 
 
 def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
@@ -198,10 +252,12 @@ def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
         identifier (``crossing_1_12_through_120``; OMSimulator accepts no other names), and the
         name itself is its description.
     fmu_dir : Path, optional
-        Folder of prebuilt FMUs: ``bogie.fmu`` / ``quarter.fmu`` are taken from there when
-        present, and ``track.fmu`` when its baked parameters (``resources/track_fmu.json``)
-        are this scenario's track and number of wheels; otherwise they are built into it
-        (replacing a ``track.fmu`` of another track). Without it the FMUs are built in a
+        Folder of prebuilt FMUs, taken from there when they carry this scenario's values:
+        ``bogie.fmu`` / ``quarter.fmu`` when their baked start values
+        (``resources/start_values.json``) are :func:`vehicle_parameters`, ``track.fmu``
+        when its baked track, number of wheels and run-parameter defaults
+        (``resources/track_fmu.json``) are this scenario's; otherwise they are built into it
+        (replacing the FMU of another scenario). Without it the FMUs are built in a
         temporary folder.
 
     Returns
@@ -231,7 +287,7 @@ def export_ssp(scenario, out_file: Path, fmu_dir: Path | None = None) -> Path:
         passage.check_passage(scenario, build_layout(scenario.track.layout), vehicle_values["x0"])
     with tempfile.TemporaryDirectory(prefix="xpanel_ssp_") as tmp:
         tmp = Path(tmp)
-        vehicle_fmu = _vehicle_fmu(scenario, fmu_dir, tmp)
+        vehicle_fmu = _vehicle_fmu(scenario, vehicle_values, fmu_dir, tmp)
         track_fmu = _track_fmu(scenario, n, fmu_dir, tmp)
         declared = model_variables(track_fmu)
         # the bindings only where the track FMU declares them; the run parameters are required

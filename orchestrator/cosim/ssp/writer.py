@@ -19,7 +19,8 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from orchestrator.cosim.ports import read_fmu_description
-from orchestrator.cosim.ssp.ssd import OSP_ANNOTATION, SSD_FILE, Component, Connection, qname, step_ns
+from orchestrator.cosim.ssp.ssd import (OMS_ANNOTATION, OSP_ANNOTATION, SSD_FILE, Component, Connection, qname,
+                                       step_ns)
 from orchestrator.inputs.errors import UserInputError
 
 _ZIP_DATE = (2000, 1, 1, 0, 0, 0)  # fixed member dates: the same input gives the same archive
@@ -130,7 +131,9 @@ def write_ssp(out_file: Path, components: Sequence[Component], connections: Sequ
               step_size: float | None = None) -> Path:
     """Write an SSP file: one ``ssd:Component`` per FMU (``resources/<name>.fmu``), its
     connected variables as connectors, its parameter values as ``resources/<name>.ssv``,
-    the connections, and a default experiment with the OSP step-size annotation.
+    the connections, a default experiment with the step in libcosim's (OSP) annotation,
+    and the system's fixed-step master with the same step in OMSimulator's annotation
+    (:func:`_add_master`).
 
     Every connection end and parameter name is checked against the FMU's
     modelDescription (causality, type): a mismatch raises :class:`UserInputError`.
@@ -156,6 +159,7 @@ def write_ssp(out_file: Path, components: Sequence[Component], connections: Sequ
     system = ET.SubElement(root, qname("ssd", "System"), {"name": identifier(name), "description": str(name)})
     used_units = _add_components(system, components, connectors, variables)
     _add_connections(system, connections)
+    _add_master(system, step_size)
     _add_units(root, components, used_units)
     _add_experiment(root, start_time, stop_time, step_size)
     return _write_archive(out_file, root, components, variables)
@@ -246,7 +250,7 @@ def _add_units(root: ET.Element, components: Sequence[Component], used_units: se
 
 def _add_experiment(root: ET.Element, start_time: float, stop_time: float | None,
                     step_size: float | None) -> None:
-    """``ssd:DefaultExperiment`` under ``root``, the step [s] in the OSP annotation
+    """``ssd:DefaultExperiment`` under ``root``, the step [s] in the OSP annotation libcosim reads
     (:class:`UserInputError` if it is not a whole number of nanoseconds)."""
     exp_attrs = {"startTime": repr(float(start_time))}
     if stop_time is not None:
@@ -258,6 +262,35 @@ def _add_experiment(root: ET.Element, start_time: float, stop_time: float | None
                             {"type": OSP_ANNOTATION})
         ET.SubElement(ET.SubElement(ann, qname("osp", "Algorithm")), qname("osp", "FixedStepAlgorithm"),
                       {"baseStepSize": repr(float(step_size))})
+
+
+OMS_MASTER = "oms-ma"        # OMSimulator's name of its fixed-step master algorithm
+OMS_TOLERANCE = 1e-4         # OMSimulator's default tolerances; a fixed-step master of CS FMUs uses none
+
+
+def _add_master(system: ET.Element, step_size: float | None) -> None:
+    """The system's master algorithm for OMSimulator (``ssd:System/ssd:Annotations``), as
+    OMSimulator writes it in the SSD files it exports::
+
+        <ssc:Annotation type="org.openmodelica">
+          <oms:Annotations>
+            <oms:SimulationInformation>
+              <oms:FixedStepMaster description="oms-ma" stepSize="2e-05" absoluteTolerance="0.0001"
+                                   relativeTolerance="0.0001"/>
+
+    OMSimulator takes the kind of a system from this annotation (a fixed-step master: a
+    weakly coupled, co-simulation system); without it its import of the system fails.
+    SSP 1.0 lets an annotation hold any element, so the file stays valid. Nothing is
+    written without a step.
+    """
+    if step_size is None:
+        return
+    ann = ET.SubElement(ET.SubElement(system, qname("ssd", "Annotations")), qname("ssc", "Annotation"),
+                        {"type": OMS_ANNOTATION})
+    info = ET.SubElement(ET.SubElement(ann, qname("oms", "Annotations")), qname("oms", "SimulationInformation"))
+    ET.SubElement(info, qname("oms", "FixedStepMaster"),
+                  {"description": OMS_MASTER, "stepSize": repr(float(step_size)),
+                   "absoluteTolerance": repr(OMS_TOLERANCE), "relativeTolerance": repr(OMS_TOLERANCE)})
 
 
 def check_out_file(out_file: Path) -> None:
