@@ -5,7 +5,9 @@ Prints, for the default scenario (0.5 s, 40 sleepers) and for a 1 s passage on a
 in-process and through the FMUs, with the compiled step and (in-process) with the
 numpy reference path: loop wall [s], us per step, linear solves per step; then the
 cost of one solve with the step matrix (SuperLU LU vs the LDL^T of track.kernel) and
-of one product with K, and numba's first-call time (warm cache: loading only).
+of one product with K, the cost of the compiled step's stages (one bogie on the panel,
+repeated calls of each stage on the step's own data), and numba's first-call time
+(warm cache: loading only).
 
 Run: python benchmarks/bench_step.py [--quick]   (the lead records the figures in RESULTS.md)
 """
@@ -66,6 +68,67 @@ def solve_costs(sc, repeat=2000):
     return model.n, lu.L.nnz + lu.U.nnz, f.nnz, integ._Kt.nnz, K.nnz, out
 
 
+def _best_us(fn, repeat: int) -> float:
+    """Best of 3 means of ``repeat`` calls [us]."""
+    fn()
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for _ in range(repeat):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / repeat * 1e6)
+    return best
+
+
+def stage_costs(sc, repeat=1000):
+    """us per call of the compiled step's stages, for a bogie 1 m ahead of the crossing transition.
+
+    The whole step (CompiledContacts.step: Python + one kernel call), the kernel call alone,
+    the call returning at once (argument passing + wheel lookup: a wheel set to need another
+    element), and the predictor (with the K and C products), solve and corrector stages.
+    """
+    from track import kernel as K
+    from track.cosim import TrackCosim
+
+    h = sc.simulation.step
+    tc = TrackCosim(sc.track, 4, 0.5 * sc.vehicle.axle_load, h, speed=sc.vehicle.speed, kernel=True)
+    x0 = tc.model.layout.x_transition - 1.0
+    x = np.array([x0, x0, x0 - 2.5, x0 - 2.5])
+    z = np.zeros(4)
+    for k in range(5):
+        tc.do_step(x + k * sc.vehicle.speed * h, z, z)
+    cc, it = tc._compiled, tc.integ
+    xs, zw = x + 5 * sc.vehicle.speed * h, z + tc.offset
+    n, m = tc.model.n, 4
+    new, Fc1, out = np.empty((4, n)), np.empty(m), np.empty((m, 4))
+    f, sh = cc.f, cc._sh
+    ts, etab, ec, es = cc._tables
+
+    def call(ent):
+        return K.contact_step(cc.par, cc.cnt, it.q, it.v, it.a, it.F, it.Fc, tc.model.f_gravity,
+                              *cc._K, *cc._C, *cc._bal, sh.ldl_Zb, sh.ldl_have, f.perm, f.Lp, f.Li, f.Lx, f.d,
+                              xs, zw, cc.wside, ts, etab, ec, es, ent, cc.T, cc.gd, cc.nr, cc.R, cc.Ze, cc.E, cc.fresh,
+                              new[0], new[1], new[2], new[3], Fc1, out, cc.W, cc.surf, cc.wts, cc.work, cc.iwork)
+
+    stale = cc.ent.copy()
+    stale[0, 0] = -1
+    par, w = cc.par, cc.work
+    qp, vp, rhs, y, acc_lin, sw, unit = (w[j * n:(j + 1) * n] for j in range(7))
+    a1, bh2, gh = 1.0 + par[K.P_ALPHA], par[K.P_BETA] * h * h, par[K.P_GAMMA] * h
+    Fn = it.Fc + 1.0
+    return {
+        "CompiledContacts.step": _best_us(lambda: cc.step(xs, z + tc.offset, tc.c_h), repeat),
+        "kernel call": _best_us(lambda: call(cc.ent), repeat),
+        "call + wheel lookup only": _best_us(lambda: call(stale), repeat),
+        "predictor (with K, C products)": _best_us(lambda: K._predict(
+            h, par[K.P_ALPHA], par[K.P_BETA], par[K.P_GAMMA], par[K.P_BETA_S], it.q, it.v, it.a, it.F,
+            tc.model.f_gravity, *cc._K, *cc._C, qp, vp, sw, y, rhs), repeat),
+        "LDL^T solve": _best_us(lambda: K.ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, rhs, acc_lin, unit), repeat),
+        "corrector (4 wheels x 4 rows)": _best_us(lambda: K._corrector(
+            a1, bh2, gh, qp, vp, acc_lin, Fn, it.Fc, cc.W, cc.Ze, new[2], new[0], new[1]), repeat),
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="0.05 s runs (smoke test)")
@@ -91,6 +154,9 @@ def main() -> None:
                 print(f"  {backend:9s} {mode:8s} loop {loop:6.2f} s, {loop / steps * 1e6:6.1f} us/step, "
                       f"{sps:.3f} solves/step, peak Fz {peak:.1f} N")
         os.environ.pop("TURNOUT_TRACK_KERNEL", None)
+        print("  compiled step, per stage (after the runs: its influence rows would count as theirs):")
+        for k, v in stage_costs(sc).items():
+            print(f"    {k}: {v:.1f} us")
     print("\n| case | backend | track step | loop wall [s] | us/step | solves/step | peak Fz [N] |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:

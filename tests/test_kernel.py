@@ -88,3 +88,65 @@ def test_ldl_solve_is_exact_to_round_off():
     x_ref = integ._lu.solve(b)
     assert np.abs(x - x_ref).max() <= 1e-10 * np.abs(x_ref).max()   # cond(A) ~ 1e3 x round-off
     assert f.nnz < integ._lu.L.nnz + integ._lu.U.nnz   # the point of it: less fill than the LU
+    # several columns at once (influence rows): the same operations per column as the one-column
+    # sweeps, so equal to round-off of the last digit (1e-14 of the largest entry allows for it)
+    B = rng.standard_normal((model.n, 4))
+    X = f.solve(B)
+    for c in range(4):
+        xc = f.solve(np.ascontiguousarray(B[:, c]))
+        assert np.abs(X[:, c] - xc).max() <= 1e-14 * np.abs(xc).max()
+    assert np.abs(A @ X - B).max() / (norm_A * np.abs(X).max()) < 1e-13
+
+
+def test_kernel_wheel_lookup_matches_model_points():
+    """The kernel's element tables give the element, shape-function values and surface heights
+    the model's own lookup gives (running_body + model.point + TrackCosim.surfaces).
+
+    Positions: random along each side, every node and every running-segment boundary
+    (exactly and 1e-9 m either side), and beyond both ends. Tolerances: the element and
+    body exactly, the element too but on a node (where either element gives the same map
+    on q, compared instead); the weights within 1e-12 (cubic coefficients fitted to four samples of
+    the shape functions, Vandermonde condition ~1e2, weights <= 1 and rotation weights
+    ~ element length, so round-off ~1e-14); the surface heights within 1e-15 m (the same
+    functions, compiled).
+    """
+    from track.cosim import TrackCosim
+    from track.kernel import (N_PAR, P_CH, SURF_GIVEN, _locate_wheels, element_tables)
+
+    sc = load_scenario(DEFAULT_SCENARIO, ["track.crossing.impact_angle=0.012"])
+    tc = TrackCosim(sc.track, 4, 98100.0, 1e-4, kernel=False)
+    model, lay = tc.model, tc.model.layout
+    par = np.zeros(N_PAR)
+    ts, etab, ec, es, bodies, elements = element_tables(model, tc.surface_geometry, par)
+    assert not (es == SURF_GIVEN).any()
+    rng = np.random.default_rng(3)
+    checked = 0
+    for iside, side in enumerate(("left", "right")):
+        segs = lay.running[side]
+        nodes = [model.body(seg.body).origin + model.body(seg.body).point_nodes() for seg in segs]
+        lo, hi = min(a[0] for a in nodes), max(a[-1] for a in nodes)
+        ends = np.array([e for seg in segs for e in (seg.x0, seg.x1) if np.isfinite(e)])
+        x = np.concatenate([rng.uniform(lo - 1.0, hi + 1.0, 400), *nodes,
+                            (ends[:, None] + np.array([-1e-9, 0.0, 1e-9])).ravel()])
+        m = x.size
+        ent = np.full((2, m), -1, np.int64)
+        W, surf = np.zeros((m, 4)), np.zeros((m, 2))
+        _locate_wheels(par, x, np.full(m, iside, np.int64), ts, etab, ec, es, ent, W, surf)
+        wheel = 0 if side == "left" else 1     # a wheel on this side (wheel_sides)
+        for i, xi in enumerate(x.tolist()):
+            name = lay.running_body(side, xi)
+            p = model.point(name, xi)
+            k = ent[1, i]
+            assert bodies[k].name == name, (side, xi)
+            if elements[k] == p.element:
+                assert np.abs(W[i, :p.shape.size] - p.shape).max() <= 1e-12, (side, xi)
+                assert np.abs(W[i, p.shape.size:]).max(initial=0.0) <= 1e-12
+            else:   # on a node (to round-off): either element, the same map on q
+                assert i >= 400, (side, xi)
+                rows = bodies[k].load_rows(elements[k])
+                wq = W[i, :rows.shape[0]] @ rows
+                assert np.abs(wq - p.weights).max() <= 1e-12 * np.abs(p.weights).max(), (side, xi)
+            assert np.abs(surf[i] - np.array(tc.surfaces(wheel, xi, name))).max() <= 1e-15, (side, xi)
+            checked += 1
+    assert checked > 1000
+    assert par[P_CH] == 0.0   # the tables write only the geometry's parameters

@@ -37,7 +37,7 @@ class Flat:
     """A nominal running surface (one surface at height 0)."""
 
     def heights(self, x: float) -> tuple[float, float]:
-        return 0.0, NO_SURFACE
+        return flat_heights(x)
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ class CrossingGeometry:
     @property
     def dip_depth(self) -> float:
         """Depth of the wing rail under the nominal level at the transfer point [m]."""
-        return WING_SHARE * self.impact_angle * (self.x_transfer - self.x_tcp)
+        return -crossing_heights(self.x_transfer, self.x_tcp, self.x_transfer, self.impact_angle)[0]
 
     def heights(self, x: float) -> tuple[float, float]:
         """Heights (z_wing, z_nose) [m] at track coordinate x."""
@@ -74,13 +74,7 @@ class CrossingGeometry:
             a = float(np.interp(x, xt, zw))
             b = float(np.interp(x, xt, zn))
             return (NO_SURFACE if np.isnan(a) else a), (NO_SURFACE if np.isnan(b) else b)
-        if x <= self.x_tcp:
-            return 0.0, NO_SURFACE
-        bw = WING_SHARE * self.impact_angle
-        bn = self.impact_angle - bw
-        z_wing = -bw * (x - self.x_tcp)
-        z_nose = min(0.0, -self.dip_depth + bn * (x - self.x_transfer))
-        return z_wing, max(z_nose, NO_SURFACE)
+        return crossing_heights(x, self.x_tcp, self.x_transfer, self.impact_angle)
 
 
 @dataclass(frozen=True)
@@ -96,8 +90,33 @@ class DippedJoint:
     angle: float
 
     def heights(self, x: float) -> tuple[float, float]:
-        d = abs(x - self.x_joint)
-        return (-0.5 * self.angle * (JOINT_RAMP - d) if d < JOINT_RAMP else 0.0), NO_SURFACE
+        return joint_heights(x, self.x_joint, self.angle)
+
+
+# The geometry as plain functions of floats: the compiled track step (track.kernel) compiles
+# these same functions, as it does hertz.
+def flat_heights(x: float) -> tuple[float, float]:
+    """Heights [m] of the nominal running surface (:class:`Flat`): one surface at 0."""
+    return 0.0, NO_SURFACE
+
+
+def crossing_heights(x: float, x_tcp: float, x_transfer: float, impact_angle: float) -> tuple[float, float]:
+    """Heights (z_wing, z_nose) [m] at track coordinate x [m] of the parameterized crossing
+    (:class:`CrossingGeometry` without a table)."""
+    if x <= x_tcp:
+        return 0.0, NO_SURFACE
+    bw = WING_SHARE * impact_angle
+    bn = impact_angle - bw
+    z_wing = -bw * (x - x_tcp)
+    dip = bw * (x_transfer - x_tcp)                      # wing-rail depth at the transfer point
+    z_nose = min(0.0, -dip + bn * (x - x_transfer))
+    return z_wing, max(z_nose, NO_SURFACE)
+
+
+def joint_heights(x: float, x_joint: float, angle: float) -> tuple[float, float]:
+    """Heights [m] at track coordinate x [m] of the V-shaped dipped joint (:class:`DippedJoint`)."""
+    d = abs(x - x_joint)
+    return (-0.5 * angle * (JOINT_RAMP - d) if d < JOINT_RAMP else 0.0), NO_SURFACE
 
 
 def hertz(w: float, z_wheel: float, surfaces: tuple[float, float], c_h: float = HERTZ_CONSTANT

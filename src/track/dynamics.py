@@ -359,99 +359,161 @@ class TrackIntegrator:
         solve. The force vector is kept as gravity + the few non-zero ballast
         corrections + the contact forces, so a step touches full-length vectors only in
         the predictor, one product with K and C, one solve and the update.
+
+        The stages are methods with the names of the compiled kernel's functions
+        (:func:`track.kernel.contact_step`), so the two can be read side by side; this
+        path applies the corrector to the whole vector at every pass, the kernel at the
+        ballast dofs only until the passes converge.
         """
-        h, a_, b, g = self.h, self.alpha, self.beta, self.gamma
-        q0, v0, acc0 = self.q, self.v, self.a
-        bh2, gh, a1 = b * h * h, g * h, 1.0 + a_
         m = len(points)
-        qp = q0 + h * v0 + (0.5 - b) * h * h * acc0
-        vp = v0 + (1 - g) * h * acc0
-        rhs = self._rhs_const - a_ * self.F - self._Ct @ (a1 * vp - a_ * v0) - self._Kt @ (a1 * qp - a_ * q0)
-        self._set_candidates()
-        Dc, cand = self._Dc, self._cand
-        qD = qp[Dc] + bh2 * acc0[Dc]
-        vD = vp[Dc] + gh * acc0[Dc]
-        corr = self._candidate_correction(qD, vD)
-        rhs[Dc] += a1 * corr
+        qp, vp, rhs = self._predict()
+        self._ballast_candidates()
+        corr = self._ballast_first_guess(qp, vp, rhs)
         Fc = self.Fc.tolist() if self.Fc.size == m else [0.0] * m
-        for p, f in zip(points, Fc):
-            rhs[p.gidx] -= (a1 * f) * p.weights
+        fmax = self._wheel_loads(points, Fc, rhs)
         acc_lin = self._lu.solve(rhs)
         self.counters.solves += 1
-        Zs = np.empty((m, self.model.n))
-        for j, p in enumerate(points):
-            Zs[j] = self.influence(p)
-        # G[i, j] = (1+alpha) beta h^2 r_i . A^-1 r_j: deflection at wheel i per force at wheel j
-        G = np.empty((m, m))
-        for i, p in enumerate(points):
-            G[i] = (a1 * bh2) * (Zs[:, p.gidx] @ p.weights)
-        Gl = G.tolist()
-        res = [p.residual for p in points]
+        Zs, G, w_pred = self._contact_coupling(points, qp)
+        ctol = CONTACT_TOL + CONTACT_REL_TOL * fmax
+        ftol = FORCE_TOL + REL_FORCE_TOL * fmax
         zw = z_wheel.tolist() if isinstance(z_wheel, np.ndarray) else [float(z) for z in z_wheel]
         Fc_arr = np.array(Fc)
-        w_pred = [float(p.weights @ qp[p.gidx]) for p in points]
-        ctol = CONTACT_TOL + CONTACT_REL_TOL * max(max(Fc, default=0.0), 1.0)
-        ftol = FORCE_TOL + REL_FORCE_TOL * max(max(Fc, default=0.0), 1.0)
         out = np.zeros((m, 4))
+        # modified-Newton passes: they repeat only while a ballast bushing changes state
         for it in range(1, MAX_ITER + 1):
-            w_lin = [wp + bh2 * float(p.weights @ acc_lin[p.gidx]) for wp, p in zip(w_pred, points)]
-            Fn = list(Fc)
-            # Newton on Fc = hertz(w(Fc)); the wheels couple weakly through G, so each
-            # sweep updates every wheel with its own diagonal Jacobian (Jacobi-Newton)
-            for _ in range(CONTACT_NEWTON_MAX):
-                dmax = 0.0
-                cpl = (G @ (np.array(Fn) - Fc_arr)).tolist()
-                for i in range(m):
-                    w = w_lin[i] - cpl[i] - res[i] * Fn[i]
-                    F, k, F1, F2 = hertz(w, zw[i], surfaces[i], c_h)
-                    step = (F - Fn[i]) / (1.0 + k * (Gl[i][i] + res[i]))
-                    new = Fn[i] + step
-                    if new < 0.0:
-                        new, step = 0.0, -Fn[i]
-                    Fn[i] = new
-                    out[i, 0], out[i, 1], out[i, 2], out[i, 3] = F, F1, F2, w
-                    if abs(step) > dmax:
-                        dmax = abs(step)
-                self.counters.contact_newton += 1
-                if dmax <= ctol:
-                    break
-            else:
-                raise ConvergenceError(f"contact forces at t = {self.t + h:.6g} s did not converge; "
-                                       f"reduce the step h = {h:.3g} s")
-            acc1 = acc_lin - a1 * ((np.array(Fn) - Fc_arr) @ Zs) if m else acc_lin
-            new_corr = self._candidate_correction(qp[Dc] + bh2 * acc1[Dc], vp[Dc] + gh * acc1[Dc])
-            dD = new_corr - corr
-            change = np.max(np.abs(dD), initial=0.0)
+            Fn = self._contact_newton(points, w_pred, acc_lin, G, Fc, zw, surfaces, c_h, ctol, out)
+            acc1 = self._corrector(acc_lin, Fn, Fc_arr, Zs)
+            new_corr, change = self._ballast_change(qp, vp, acc1, corr)
             if change <= ftol:
                 Fc = Fn
                 break
-            # a bushing opened or closed: correct the linear solution through the
-            # ballast influence rows instead of a new solve
-            sel = np.flatnonzero(np.abs(dD) > FORCE_TOL)
-            acc_lin = acc_lin + a1 * (dD[sel] @ self._ballast_rows(cand[sel]))
+            acc_lin = self._ballast_row_correction(acc_lin, new_corr - corr)
             corr = new_corr
         else:
             raise ConvergenceError(
-                f"track step at t = {self.t + h:.6g} s did not converge in {MAX_ITER} iterations "
-                f"(last force change {change:.3g} N); reduce the step h = {h:.3g} s")
-        F = self.model.f_gravity.copy()
-        F[Dc] += corr
-        for p, f in zip(points, Fc):
-            F[p.gidx] -= f * p.weights
+                f"track step at t = {self.t + self.h:.6g} s did not converge in {MAX_ITER} iterations "
+                f"(last force change {change:.3g} N); reduce the step h = {self.h:.3g} s")
+        F = self._end_forces(points, Fc, corr)
         self.counters.iterations += it
         if it > self.counters.max_iterations:
             self.counters.max_iterations = it
         self.counters.steps += 1
+        bh2, gh = self.beta * self.h * self.h, self.gamma * self.h
         self.q, self.v, self.a, self.F, self.Fc = qp + bh2 * acc1, vp + gh * acc1, acc1, F, np.array(Fc)
         self.k += 1
         out[:, 0] = Fc  # the converged forces (equal to hertz(w) within CONTACT_TOL)
         return out
 
-    def _set_candidates(self) -> None:
+    # stages of step_contacts (same names as the compiled kernel's functions, track.kernel)
+    def _predict(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Newmark predictors ``qp`` [m], ``vp`` [m/s] and the linear right-hand side [N]
+        ``(1+alpha) f_grav - alpha F0 - C ((1+alpha) vp - alpha v0) - K ((1+alpha) qp - alpha q0)``."""
+        h, a_, b, g = self.h, self.alpha, self.beta, self.gamma
+        q0, v0, acc0 = self.q, self.v, self.a
+        a1 = 1.0 + a_
+        qp = q0 + h * v0 + (0.5 - b) * h * h * acc0
+        vp = v0 + (1 - g) * h * acc0
+        rhs = self._rhs_const - a_ * self.F - self._Ct @ (a1 * vp - a_ * v0) - self._Kt @ (a1 * qp - a_ * q0)
+        return qp, vp, rhs
+
+    def _ballast_candidates(self) -> None:
+        """The ballast bushings that may change state within the step (:meth:`_nonlinear_bushings`)
+        and their parameters, kept for :meth:`_candidate_correction`."""
         cand = self._nonlinear_bushings()
         bal = self.model.ballast
         self._cand, self._Dc = cand, self._D[cand]
         self._kc, self._cc, self._gc = bal.k[cand], bal.c[cand], bal.gap[cand]
+
+    def _ballast_first_guess(self, qp: np.ndarray, vp: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        """Corrections [N] of the candidate bushings at the state reached with ``a1 = a0``, added to
+        ``rhs`` (times 1+alpha) in place."""
+        bh2, gh, a1, Dc, acc0 = self.beta * self.h * self.h, self.gamma * self.h, 1.0 + self.alpha, self._Dc, self.a
+        corr = self._candidate_correction(qp[Dc] + bh2 * acc0[Dc], vp[Dc] + gh * acc0[Dc])
+        rhs[Dc] += a1 * corr
+        return corr
+
+    def _wheel_loads(self, points: Sequence[PointMap], Fc: list, rhs: np.ndarray) -> float:
+        """The last step's contact forces ``Fc`` [N] (the first guess) subtracted from ``rhs`` (times
+        1+alpha) in place; returns the largest, at least 1 N (the scale of the tolerances)."""
+        a1 = 1.0 + self.alpha
+        for p, f in zip(points, Fc):
+            rhs[p.gidx] -= (a1 * f) * p.weights
+        return max(max(Fc, default=0.0), 1.0)
+
+    def _contact_coupling(self, points: Sequence[PointMap], qp: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, list]:
+        """Influence rows ``Zs[j] = A^{-1} r_j`` (m, n), ``G[i, j] = (1+alpha) beta h^2 r_i . A^-1 r_j``
+        [m/N] (deflection at wheel i per force at wheel j) and the predicted deflections [m]."""
+        m, a1bh2 = len(points), (1.0 + self.alpha) * (self.beta * self.h * self.h)
+        Zs = np.empty((m, self.model.n))
+        for j, p in enumerate(points):
+            Zs[j] = self.influence(p)
+        G = np.empty((m, m))
+        for i, p in enumerate(points):
+            G[i] = a1bh2 * (Zs[:, p.gidx] @ p.weights)
+        return Zs, G, [float(p.weights @ qp[p.gidx]) for p in points]
+
+    def _contact_newton(self, points: Sequence[PointMap], w_pred: list, acc_lin: np.ndarray, G: np.ndarray,
+                        Fc: list, zw: list, surfaces: Sequence[tuple], c_h: float, ctol: float,
+                        out: np.ndarray) -> list:
+        """Newton on ``Fc = hertz(w(Fc))`` for one pass; returns the forces [N].
+
+        ``w = w_lin - G (Fn - Fc) - residual Fn`` with ``w_lin`` the deflection of the pass's
+        linear solution ``acc_lin``. The wheels couple weakly through G, so each sweep updates
+        every wheel with its own diagonal Jacobian (Jacobi-Newton). Per wheel, (hertz force,
+        its parts, deflection) go to ``out``.
+        """
+        bh2, m = self.beta * self.h * self.h, len(points)
+        Gl = G.tolist()
+        res = [p.residual for p in points]
+        Fc_arr = np.array(Fc)
+        w_lin = [wp + bh2 * float(p.weights @ acc_lin[p.gidx]) for wp, p in zip(w_pred, points)]
+        Fn = list(Fc)
+        for _ in range(CONTACT_NEWTON_MAX):
+            dmax = 0.0
+            cpl = (G @ (np.array(Fn) - Fc_arr)).tolist()
+            for i in range(m):
+                w = w_lin[i] - cpl[i] - res[i] * Fn[i]
+                F, k, F1, F2 = hertz(w, zw[i], surfaces[i], c_h)
+                step = (F - Fn[i]) / (1.0 + k * (Gl[i][i] + res[i]))
+                new = Fn[i] + step
+                if new < 0.0:
+                    new, step = 0.0, -Fn[i]
+                Fn[i] = new
+                out[i, 0], out[i, 1], out[i, 2], out[i, 3] = F, F1, F2, w
+                if abs(step) > dmax:
+                    dmax = abs(step)
+            self.counters.contact_newton += 1
+            if dmax <= ctol:
+                return Fn
+        raise ConvergenceError(f"contact forces at t = {self.t + self.h:.6g} s did not converge; "
+                               f"reduce the step h = {self.h:.3g} s")
+
+    def _corrector(self, acc_lin: np.ndarray, Fn: list, Fc: np.ndarray, Zs: np.ndarray) -> np.ndarray:
+        """End-of-step acceleration ``acc_lin - (1+alpha) sum_i (Fn_i - Fc_i) A^-1 r_i`` [m/s^2]."""
+        return acc_lin - (1.0 + self.alpha) * ((np.array(Fn) - Fc) @ Zs) if len(Fn) else acc_lin
+
+    def _ballast_change(self, qp: np.ndarray, vp: np.ndarray, acc1: np.ndarray, corr: np.ndarray
+                        ) -> tuple[np.ndarray, float]:
+        """Corrections [N] of the candidate bushings at the end-of-step state of this pass and the
+        largest change from ``corr`` [N]."""
+        bh2, gh, Dc = self.beta * self.h * self.h, self.gamma * self.h, self._Dc
+        new_corr = self._candidate_correction(qp[Dc] + bh2 * acc1[Dc], vp[Dc] + gh * acc1[Dc])
+        return new_corr, np.max(np.abs(new_corr - corr), initial=0.0)
+
+    def _ballast_row_correction(self, acc_lin: np.ndarray, dD: np.ndarray) -> np.ndarray:
+        """A bushing opened or closed (correction change ``dD`` [N]): the linear solution corrected
+        through the ballast influence rows instead of a new solve."""
+        sel = np.flatnonzero(np.abs(dD) > FORCE_TOL)
+        return acc_lin + (1.0 + self.alpha) * (dD[sel] @ self._ballast_rows(self._cand[sel]))
+
+    def _end_forces(self, points: Sequence[PointMap], Fc: list, corr: np.ndarray) -> np.ndarray:
+        """The step's right-hand side: gravity + ballast corrections - contact forces on the rails [N]."""
+        F = self.model.f_gravity.copy()
+        F[self._Dc] += corr
+        for p, f in zip(points, Fc):
+            F[p.gidx] -= f * p.weights
+        return F
 
     def _candidate_correction(self, qD: np.ndarray, vD: np.ndarray) -> np.ndarray:
         """Ballast correction (f_b + k q + c v) of the candidate bushings, see ballast.py."""

@@ -81,6 +81,27 @@ class Body:
         """
         return self.origin + (self.fom.station_s if self.solid else self.fom.s)
 
+    def point_nodes(self) -> np.ndarray:
+        """Body coordinates s [m] of the nodes a point is interpolated between: the FE nodes
+        of a beam, the contact-path nodes of the solid (element ``e`` spans nodes e, e+1)."""
+        return self.fom.contact_s if self.solid else self.fom.s
+
+    def point_row(self, s: float) -> tuple[int, np.ndarray]:
+        """Element and interpolation weights of the point at body coordinate ``s`` [m] (clipped):
+        beam shape functions on the element's 4 dofs (:meth:`BeamBody.shape_row`), or linear
+        weights on the solid's 2 path nodes (:meth:`SolidCrossing.path_row`)."""
+        return self.fom.path_row(s) if self.solid else self.fom.shape_row(s)
+
+    def residual_block(self, element: int) -> np.ndarray:
+        """The 4x4 residual flexibility [m/N] of a beam element's dofs (computed once, cached);
+        zeros for the solid (no residual flexibility on its retained path nodes)."""
+        if self.solid:
+            return np.zeros((4, 4))
+        R = self.residual_blocks.get(element)
+        if R is None:
+            R = self.residual_blocks[element] = element_residual(self.rom, np.arange(2 * element, 2 * element + 4))
+        return R
+
     def load_rows(self, element: int) -> np.ndarray:
         """Rows of ``T`` (k, nr) on which a point load in ``element`` acts.
 
@@ -193,13 +214,10 @@ class TrackModel:
         ``coord`` is x [m] for rails and y [m] for sleepers; it is clipped to the body.
         """
         b = self.body(body)
+        e, w = b.point_row(coord - b.origin)
         if b.solid:   # linear between two retained contact-path nodes: no residual flexibility
-            e, w = b.fom.path_row(coord - b.origin)
             return PointMap(body, coord, b.gdofs, w @ b.fom.segment_rows(e), 0.0, e, w)
-        e, w = b.fom.shape_row(coord - b.origin)
-        R = b.residual_blocks.get(e)
-        if R is None:  # the 4x4 residual flexibility of this element, computed once
-            R = b.residual_blocks[e] = element_residual(b.rom, np.arange(2 * e, 2 * e + 4))
+        R = b.residual_block(e)
         return PointMap(body, coord, b.gdofs, w @ b.rom.T[2 * e:2 * e + 4, :], float(w @ R @ w), e, w)
 
     def rail_point(self, side: str, x: float) -> PointMap:
