@@ -3,6 +3,11 @@
 - vehicle: input contact forces ``Fz`` (up +) -> outputs wheel ``x``, ``z`` (up +), ``vz``;
 - track: inputs wheel ``x``, ``z``, ``vz`` -> outputs contact forces ``Fz``.
 
+The coupling values (the vehicle's ``outputs()``, the track's ``forces()``) are arrays
+the caller owns: a later ``step`` of the unit does not change them (the Jacobi master reads
+the vehicle's outputs at ``t_k``, steps the vehicle, then hands those ``t_k`` values to the
+track). The track's ``outputs()`` are for recording at once.
+
 ``InProcessVehicle`` / ``InProcessTrack`` step the model objects directly
 (``vehicle.VehicleStepper``, ``track.cosim.TrackCosim``); ``FmuVehicle`` / ``FmuTrack``
 run FMUs (ours, or a third-party vehicle mapped through the scenario's ``ports``) through
@@ -70,7 +75,15 @@ class InProcessVehicle:
         self.t = t + h
 
     def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.model.wheel_x(self.t, self.x0, self.speed), self.stepper.wheel_z, self.stepper.wheel_vz
+        """Wheel ``x`` [m], ``z`` [m] (up +), ``vz`` [m/s] at the unit's time: copies the caller owns.
+
+        The stepper updates ``wheel_z`` / ``wheel_vz`` in place at every step, so views would
+        turn the start-of-step values a Jacobi master holds while the vehicle steps into
+        end-of-step ones (the track then extrapolated them a second time: peak forces 1 %
+        off the FMU backend's on the default scenario). FMU outputs are copies by nature.
+        """
+        return (self.model.wheel_x(self.t, self.x0, self.speed), self.stepper.wheel_z.copy(),
+                self.stepper.wheel_vz.copy())
 
     def terminate(self) -> None:
         pass
@@ -97,8 +110,8 @@ class InProcessTrack:
         self.engine.do_step(x, z, vz)
 
     def forces(self) -> np.ndarray:
-        """The vehicle's input: the contact forces, extrapolated when asked."""
-        return self.engine.Fz_coupling
+        """The vehicle's input: the contact forces, extrapolated when asked [N] (a copy)."""
+        return self.engine.Fz_coupling.copy()
 
     def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         e = self.engine
