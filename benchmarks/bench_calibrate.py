@@ -22,8 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from orchestrator.inverse import calibrate as cal
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario, scenario_from_dict
+from orchestrator.inverse import calibrate as cal
 from orchestrator.inverse.synthetic import Effect, synthesize
 
 SCENARIO = "measurement/crossing_quarter_120.yaml"

@@ -28,10 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.inverse.diagnose import diagnose
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario
-from orchestrator.inputs.sensor_layout import layout_of
-from orchestrator.inputs.sensor_layout import resolve
+from orchestrator.inputs.sensor_layout import layout_of, resolve
+from orchestrator.inverse.diagnose import diagnose
 from orchestrator.inverse.synthetic import HIDDEN_KINDS, hidden_effect, synthesize
 from track.model import build_track
 

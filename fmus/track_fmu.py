@@ -97,14 +97,20 @@ from pythonfmu.variables import Integer, Real, String
 from .base import UNITS, CosimSlave
 
 try:  # inside a built FMU the model package is bundled next to this module
-    from .track import ballast as _ballast, cosim as _cosim, dynamics as _dynamics, model as _model
+    from .track import ballast as _ballast
+    from .track import cosim as _cosim
+    from .track import dynamics as _dynamics
+    from .track import model as _model
     from .track import params as _params
     from .track import sensors as _sensors
     from .track.solid import crossing as _crossing
 except ModuleNotFoundError as _exc:  # source tree: src/ on sys.path
     if _exc.name != f"{__package__}.track":
         raise   # a dependency of the bundled package is missing (scipy, ...): say which
-    from track import ballast as _ballast, cosim as _cosim, dynamics as _dynamics, model as _model
+    from track import ballast as _ballast
+    from track import cosim as _cosim
+    from track import dynamics as _dynamics
+    from track import model as _model
     from track import params as _params
     from track import sensors as _sensors
     from track.solid import crossing as _crossing

@@ -323,7 +323,6 @@ def _cmd_frf(args: argparse.Namespace) -> int:
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from orchestrator.inputs.scenario import load_scenario
-
     from orchestrator.sweeps import sweep
     if args.run_list is not None:
         variations = sweep.list_from_file(args.run_list)
@@ -345,7 +344,6 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from orchestrator.inputs.scenario import load_scenario
-
     from orchestrator.inverse import calibrate as calibration
     out_dir = args.out if args.out is not None else \
         RESULTS_DIR / f"{load_scenario(args.scenario).name}-calibration"
@@ -364,7 +362,6 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     from orchestrator.inputs.scenario import load_scenario
-
     from orchestrator.inverse import diagnose as diagnosis
     out_dir = args.out if args.out is not None else RESULTS_DIR / f"{load_scenario(args.scenario).name}-diagnosis"
     result = diagnosis.diagnose(args.scenario, args.measured, out_dir, validate=args.validate, workers=args.workers,

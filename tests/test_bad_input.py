@@ -165,7 +165,7 @@ def test_broken_fmu_is_a_one_line_error(tmp_path, content):
     path = _write_scenario(tmp_path, {"fmu": str(fmu), "speed": 33.333, "ports": [PORT]})
     rc, _, err = cli(["run", path, "--dry-run"])
     assert_one_line_exit_2(rc, err, "vehicle.fmu", "not a readable FMU")
-    from orchestrator.cosim.units import FmuVehicle   # the run's own loader refuses it the same way
+    from orchestrator.cosim.units import FmuVehicle  # the run's own loader refuses it the same way
     from orchestrator.inputs.specs import PortMap
     with pytest.raises(UserInputError, match="not a readable FMU"):
         FmuVehicle(fmu, [PortMap(**PORT)], {}, {})

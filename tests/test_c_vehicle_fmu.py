@@ -15,8 +15,7 @@ import pytest
 
 fmpy = pytest.importorskip("fmpy")
 
-from c_vehicle import (MODEL_IDENTIFIER, build_c_vehicle_fmu,  # noqa: E402
-                       find_c_compiler, fmu_platform)
+from c_vehicle import MODEL_IDENTIFIER, build_c_vehicle_fmu, find_c_compiler, fmu_platform  # noqa: E402
 
 if find_c_compiler() is None:
     pytest.skip("no C compiler (cc or gcc) on PATH: cannot build the C vehicle FMU",
@@ -28,9 +27,13 @@ except RuntimeError as exc:
 
 from fmpy import calloc, extract, free, read_model_description, simulate_fmu  # noqa: E402
 from fmpy.fmi1 import FMICallException  # noqa: E402
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE,  # noqa: E402
-                       fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                       fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (  # noqa: E402
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
 from fmpy.validation import validate_fmu  # noqa: E402
 
 from vehicle import GRAVITY, QuarterParams, VehicleStepper, quarter_vehicle  # noqa: E402

@@ -15,15 +15,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SCENARIOS_DIR
 from scipy.optimize import brentq
 
-from orchestrator.inverse import calibrate as cal
-from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.cli import main
+from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
-
-from conftest import SCENARIOS_DIR
+from orchestrator.inverse import calibrate as cal
 
 MEASUREMENT = SCENARIOS_DIR / "measurement" / "crossing_quarter_120.yaml"
 T = 21  # crossing transition sleeper of the measurement scenario (orchestrator.results.analysis.reference_point)
@@ -421,9 +420,9 @@ def test_polish_alone_recovers_the_eight_parameters_from_the_nominal_model(tmp_p
     """
     import functools
 
-    from orchestrator.inverse.objective import Target
     from orchestrator.cosim.sensing import simulate_sensors
     from orchestrator.inputs.sensor_layout import layout_of
+    from orchestrator.inverse.objective import Target
 
     t = FULL_TRUTH
     measured = _synthetic(tmp_path, t["h1"], t["h2"], t["gaps"])

@@ -27,6 +27,8 @@ import pytest
 distributed = pytest.importorskip("distributed")
 psutil = pytest.importorskip("psutil")
 
+from conftest import DEFAULT_SCENARIO  # noqa: E402
+
 from orchestrator.cosim.portable import FILES_DIR  # noqa: E402
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario  # noqa: E402
 from orchestrator.inputs.sensor_layout import layout_of, resolve  # noqa: E402
@@ -37,8 +39,6 @@ from orchestrator.sweeps.executors import make_executor  # noqa: E402
 from orchestrator.sweeps.store import WORK_PREFIX  # noqa: E402
 from orchestrator.sweeps.workers import THREAD_VARIABLES, THREADS_ENV, default_workers  # noqa: E402
 from track.model import build_track  # noqa: E402
-
-from conftest import DEFAULT_SCENARIO  # noqa: E402
 
 MEASUREMENT = bundled_scenario("measurement/crossing_quarter_120.yaml")
 SHORT_DURATION = 0.1  # s: the measurement scenario cut short; its synthetic passage keeps > 100 samples (the minimum)

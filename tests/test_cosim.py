@@ -2,6 +2,7 @@
 import numpy as np
 import scipy.optimize as so
 import scipy.signal as ss
+from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO
 
 from orchestrator.cosim.master import run_cosim
 from orchestrator.inputs.scenario import load_scenario
@@ -9,9 +10,6 @@ from track.frf import receptance
 from track.layout import build_layout
 from track.model import build_track
 from track.statics import static_equilibrium
-
-from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO
-
 
 DEFAULT_STEP = load_scenario(DEFAULT_SCENARIO).simulation.step
 

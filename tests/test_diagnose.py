@@ -27,10 +27,9 @@ Parameter tolerances, and why:
 import numpy as np
 import pytest
 
-from orchestrator.inverse.diagnose import diagnose
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario
-from orchestrator.inputs.sensor_layout import layout_of
-from orchestrator.inputs.sensor_layout import resolve
+from orchestrator.inputs.sensor_layout import layout_of, resolve
+from orchestrator.inverse.diagnose import diagnose
 from orchestrator.inverse.synthetic import hidden_effect, synthesize
 from track.model import build_track
 
@@ -66,8 +65,8 @@ def test_hidden_effect_is_named_fitted_and_gains(setup, tmp_path, kind, seed):
     synthesize(sc, effect, tmp_path / "passage.csv", seed=seed)
     validate = []
     if kind == "ballast_void":
-        from orchestrator.inputs.scenario import scenario_from_dict
         from orchestrator.cosim.sensing import variant_for_speed
+        from orchestrator.inputs.scenario import scenario_from_dict
         slow = scenario_from_dict(variant_for_speed(sc.raw, VALIDATION_SPEED), source=str(SCENARIO),
                                   base_dir=SCENARIO.parent)
         synthesize(slow, effect, tmp_path / "passage_100.h5", seed=seed + 1000)

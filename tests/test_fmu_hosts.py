@@ -29,9 +29,16 @@ pytest.importorskip("pythonfmu")
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from fmus.build import (PYTHON_CONFIG_FILE, REQUIREMENTS_FILE, WRAPPER_SUFFIX,  # noqa: E402
-                        build_fmu, build_track_fmu, find_c_compiler, fmi2_headers_dir,
-                        shim_platform_ok)
+from fmus.build import (  # noqa: E402
+    PYTHON_CONFIG_FILE,
+    REQUIREMENTS_FILE,
+    WRAPPER_SUFFIX,
+    build_fmu,
+    build_track_fmu,
+    find_c_compiler,
+    fmi2_headers_dir,
+    shim_platform_ok,
+)
 from track.params import LayoutParams, TrackParams  # noqa: E402
 
 if not shim_platform_ok():

@@ -16,17 +16,28 @@ pytest.importorskip("pythonfmu")
 
 from fmpy import calloc, extract, free, read_model_description  # noqa: E402
 from fmpy.fmi1 import FMICallException  # noqa: E402
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE,  # noqa: E402
-                       fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                       fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (  # noqa: E402
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
 from fmpy.validation import validate_fmu  # noqa: E402
 from scipy.optimize import brentq  # noqa: E402
 
 from fmus.build import build_fmu, build_track_fmu  # noqa: E402
 from track.contact import HERTZ_CONSTANT, hertz_deflection  # noqa: E402
 from track.model import build_track  # noqa: E402
-from track.params import (BallastParams, LayoutParams, PadOverride, RailPadParams,  # noqa: E402
-                          TrackParams, VoidSpec, track_params_from_dict)
+from track.params import (  # noqa: E402
+    BallastParams,
+    LayoutParams,
+    PadOverride,
+    RailPadParams,
+    TrackParams,
+    VoidSpec,
+    track_params_from_dict,
+)
 from track.statics import static_equilibrium  # noqa: E402
 
 FMI_DISCARD = 2
@@ -574,8 +585,8 @@ EPS = np.finfo(float).eps
 def crossing_fmu(tmp_path_factory, scenarios_dir):
     """The quarter scenario's track (40-sleeper 1:12 turnout) as a 2-wheel FMU with the
     scenario's sensor layout, resolved and baked by orchestrator.cosim.build_job."""
-    from orchestrator.inputs.sensor_layout import scenario_sensors
     from orchestrator.inputs.scenario import load_scenario
+    from orchestrator.inputs.sensor_layout import scenario_sensors
 
     scenario = load_scenario(scenarios_dir / QUARTER_SCENARIO)
     sensors = scenario_sensors(scenario)
@@ -708,11 +719,9 @@ def test_sensor_reader_matches_sensor_signals_with_open_bushings(scenarios_dir):
     states of a turnout with a void under the transition sleeper, where some bushings
     under the pressure cells are open and some closed: the restricted ballast evaluates
     the same bi-linear law.  Tolerance as in the FMU test above: 2 gamma_n |c|.|x|."""
-    from orchestrator.inputs.scenario import load_scenario
-    from orchestrator.inputs.sensor_layout import layout_of
-    from orchestrator.inputs.sensor_layout import resolve
-
     from fmus.track_fmu import SensorReader
+    from orchestrator.inputs.scenario import load_scenario
+    from orchestrator.inputs.sensor_layout import layout_of, resolve
     from track.sensors import compile_sensors, displacement_row, sensor_signals
 
     scenario = load_scenario(scenarios_dir / QUARTER_SCENARIO)
@@ -788,8 +797,8 @@ def test_fmu_state_round_trip_restores_the_sensor_outputs(crossing_fmu):
 def test_build_job_sensor_layout_policy(plain_scenario, scenarios_dir, caplog):
     """The default layout is drawn for a turnout: on the plain track it does not fit,
     so build_fmus bakes no sensors and warns; a layout the scenario names must fit."""
-    from orchestrator.inputs.sensor_layout import scenario_sensors
     from orchestrator.inputs.errors import UserInputError
+    from orchestrator.inputs.sensor_layout import scenario_sensors
 
     with caplog.at_level(logging.WARNING, logger="orchestrator.cosim.sensing"):
         assert scenario_sensors(plain_scenario) == []

@@ -12,14 +12,17 @@ pytest.importorskip("pythonfmu")
 
 from fmpy import calloc, extract, free, read_model_description, simulate_fmu  # noqa: E402
 from fmpy.fmi1 import FMICallException  # noqa: E402
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE,  # noqa: E402
-                       fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                       fmi2CallbackLoggerTYPE)
+from fmpy.fmi2 import (  # noqa: E402
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+)
 from fmpy.validation import validate_fmu  # noqa: E402
 
 from fmus.build import build_fmu  # noqa: E402
-from vehicle import (BogieParams, QuarterParams, VehicleStepper, bogie,  # noqa: E402
-                     quarter_vehicle)
+from vehicle import BogieParams, QuarterParams, VehicleStepper, bogie, quarter_vehicle  # noqa: E402
 
 FMI_DISCARD = 2
 KINDS = ("bogie", "quarter")

@@ -1,7 +1,7 @@
 """Receptance of plain track: the pinned-pinned resonance (DESIGN.md §6 rung 2)."""
 import numpy as np
-
 from test_elements import ss_timoshenko_frequency
+
 from track.frf import receptance
 from track.model import build_track
 from track.params import LayoutParams, TrackParams

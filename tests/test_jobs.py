@@ -4,16 +4,15 @@ import json
 import h5py
 import numpy as np
 import pytest
+from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO
 
 from orchestrator.cli import main
-from orchestrator.inputs.errors import UserInputError
 from orchestrator.cosim.master import run_cosim
+from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
 from track.model import build_track
 from track.params import GRAVITY
 from track.post import ballast_forces
-
-from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO
 
 QUICK = ["vehicle.fmu=quarter", "simulation.duration=0.01"]
 

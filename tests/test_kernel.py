@@ -6,6 +6,7 @@ Newton sweeps) and count the same work.
 """
 import numpy as np
 import pytest
+from conftest import DEFAULT_SCENARIO
 
 from orchestrator.cosim.master import run_cosim
 from orchestrator.inputs.scenario import load_scenario
@@ -15,8 +16,6 @@ from track.kernel import KERNEL_ENV, LDLFactor, prune
 from track.layout import build_layout
 from track.model import build_track
 from track.statics import static_equilibrium
-
-from conftest import DEFAULT_SCENARIO
 
 pytest.importorskip("numba")
 
@@ -111,7 +110,7 @@ def test_kernel_wheel_lookup_matches_model_points():
     functions, compiled).
     """
     from track.cosim import TrackCosim
-    from track.kernel import (N_PAR, P_CH, SURF_GIVEN, _locate_wheels, element_tables)
+    from track.kernel import N_PAR, P_CH, SURF_GIVEN, _locate_wheels, element_tables
 
     sc = load_scenario(DEFAULT_SCENARIO, ["track.crossing.impact_angle=0.012"])
     tc = TrackCosim(sc.track, 4, 98100.0, 1e-4, kernel=False)

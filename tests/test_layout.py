@@ -17,9 +17,17 @@ import math
 import numpy as np
 import pytest
 
-from track.layout import (BEARER_OVERHANG, CHECK_HEAD_WIDTH, CROSSING_FRONT_SEPARATION,
-                          CROSSING_REAR_SEPARATION, CROSSING_SEAT_MIN_WIDTH, FLANGEWAY,
-                          NOSE_WIDTH_AT_TRANSFER, RAIL_HEAD_WIDTH, build_layout)
+from track.layout import (
+    BEARER_OVERHANG,
+    CHECK_HEAD_WIDTH,
+    CROSSING_FRONT_SEPARATION,
+    CROSSING_REAR_SEPARATION,
+    CROSSING_SEAT_MIN_WIDTH,
+    FLANGEWAY,
+    NOSE_WIDTH_AT_TRANSFER,
+    RAIL_HEAD_WIDTH,
+    build_layout,
+)
 from track.params import LayoutParams
 
 G = 1.435

@@ -4,15 +4,22 @@ Every file is generated into ``tmp_path`` by the test that reads it.
 """
 from __future__ import annotations
 
-
 import h5py
 import numpy as np
 import pytest
 import scipy.io
 
 from orchestrator.inputs.errors import UserInputError
-from orchestrator.inputs.measured import (MAX_GAP_SAMPLES, MeasuredData, align, check_measured, check_rate,
-                                   read_measured, resample, write_measured)
+from orchestrator.inputs.measured import (
+    MAX_GAP_SAMPLES,
+    MeasuredData,
+    align,
+    check_measured,
+    check_rate,
+    read_measured,
+    resample,
+    write_measured,
+)
 
 SENSORS = {"A1": "pressure", "A2": "pressure", "C1": "displacement", "D1": "strain", "E1": "acceleration"}
 RATE = 2000.0                 # Hz, a typical field-measurement rate

@@ -7,11 +7,10 @@ ahead of the transfer point to 3 m behind it (orchestrator.sweeps.study.run_case
 """
 import numpy as np
 import pytest
-
-from orchestrator.studies.figures import SEED001
-
 from conftest import REPO_ROOT, SCENARIOS_DIR
+
 from orchestrator.inputs.scenario import load_scenario
+from orchestrator.studies.figures import SEED001
 from orchestrator.sweeps.study import run_case
 
 KMH = 1 / 3.6
@@ -110,8 +109,8 @@ def test_d_moments_grow_with_impact_angle(runs):
 def test_figures_command_writes_the_seed_figures(tmp_path, monkeypatch, capsys):
     """`turnout figures` end to end on a reduced grid (2 speeds instead of 6): every figure
     file is written and the table has one row per run; a second call resumes (no run redone)."""
-    from orchestrator.studies import figures
     from orchestrator.cli import main
+    from orchestrator.studies import figures
 
     monkeypatch.setattr(figures, "SPEEDS_KMH", (80, 200))
     monkeypatch.chdir(REPO_ROOT)  # an installed package finds the bundled scenarios from here

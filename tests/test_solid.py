@@ -23,9 +23,19 @@ from track.params import RAIL_60E1, BeamProfile, BeamSection
 from track.reduction import craig_bampton, static_correction
 from track.solid.body import SolidRailParams, solid_rail
 from track.solid.coupling import BEAM, distributing_coupling, rigid_motion, surface_coupling, tie
-from track.solid.fem import (SurfaceMoments, assemble, assemble_load, body_force, boundary_nodes,
-                             faces_on_plane, lame, nodes_on_line, nodes_on_plane, shear_coefficient,
-                             surface_moments)
+from track.solid.fem import (
+    SurfaceMoments,
+    assemble,
+    assemble_load,
+    body_force,
+    boundary_nodes,
+    faces_on_plane,
+    lame,
+    nodes_on_line,
+    nodes_on_plane,
+    shear_coefficient,
+    surface_moments,
+)
 from track.solid.mesh import CrossingGeometry, rail_solid_mesh, refine, section_mesh, tet_volumes
 from track.solid.reduction import factorize, lowest_modes, static_correction_sparse
 from track.solid.section import RailSection, polygon_properties, rail_60e1_like

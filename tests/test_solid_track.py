@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import DEFAULT_SCENARIO
 
 from orchestrator.cosim.master import run_cosim
 from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
@@ -20,8 +21,6 @@ from track.model import build_track
 from track.params import LayoutParams, TrackParams
 from track.post import ballast_forces, body_response, strain
 from track.statics import static_equilibrium
-
-from conftest import DEFAULT_SCENARIO
 
 F_AGREE = 250.0      # Hz: seed 000 §5.3, "very good agreement below 250 Hz"
 

@@ -33,10 +33,20 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
+from orchestrator.cosim.ssp import (
+    NS,
+    SSD_FILE,
+    Component,
+    Connection,
+    default_x_start,
+    export_ssp,
+    read_ssp,
+    run_ssp_fmpy,
+    run_ssp_libcosim,
+    write_ssp,
+)
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.scenario import load_scenario, read_yaml, scenario_from_dict
-from orchestrator.cosim.ssp import (NS, SSD_FILE, Component, Connection, default_x_start, export_ssp,
-                              read_ssp, run_ssp_fmpy, run_ssp_libcosim, write_ssp)
 
 fmpy = pytest.importorskip("fmpy")
 from fmpy import extract, read_model_description  # noqa: E402

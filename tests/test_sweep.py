@@ -22,13 +22,12 @@ import types
 from pathlib import Path
 
 import pytest
+from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO, SCENARIOS_DIR
 
-from orchestrator.sweeps import sweep
 from orchestrator.cli import main
 from orchestrator.inputs.errors import ScenarioError, UserInputError
 from orchestrator.inputs.scenario import load_scenario
-
-from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO, SCENARIOS_DIR
+from orchestrator.sweeps import sweep
 
 SPEEDS = "2.78,27.78,55.56"  # m/s (10, 100, 200 km/h)
 ANGLES = "0.006,0.012"  # rad (nominal, worn)

@@ -7,8 +7,15 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from vehicle import (GRAVITY, BogieParams, QuarterParams, VehicleStepper, bogie,
-                     bounce_pitch_frequencies, quarter_vehicle)
+from vehicle import (
+    GRAVITY,
+    BogieParams,
+    QuarterParams,
+    VehicleStepper,
+    bogie,
+    bounce_pitch_frequencies,
+    quarter_vehicle,
+)
 
 RNG_SEED = 20240611
 

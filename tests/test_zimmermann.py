@@ -14,8 +14,15 @@ import pytest
 
 from track.layout import build_layout
 from track.model import build_track
-from track.params import (CONCRETE_BEARER, RAIL_60E1, BallastParams, BeamProfile, LayoutParams,
-                          RailPadParams, TrackParams)
+from track.params import (
+    CONCRETE_BEARER,
+    RAIL_60E1,
+    BallastParams,
+    BeamProfile,
+    LayoutParams,
+    RailPadParams,
+    TrackParams,
+)
 from track.post import body_response
 from track.statics import static_equilibrium
 

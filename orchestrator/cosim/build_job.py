@@ -34,11 +34,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from track.layout import build_layout
-from track.solid.crossing import cache_dir_from_env
-
 from orchestrator.cosim.passage import n_wheels, start_position
 from orchestrator.inputs.sensor_layout import scenario_sensors
+from track.layout import build_layout
+from track.solid.crossing import cache_dir_from_env
 
 VEHICLE_KINDS = ("bogie", "quarter")
 FMU_CACHE_FOLDER = "fmus"     # under the cache folder: one sub-folder per build key

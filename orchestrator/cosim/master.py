@@ -44,8 +44,7 @@ from typing import Callable
 import numpy as np
 
 from orchestrator.cosim.algorithms import ALGORITHMS
-from orchestrator.cosim.passage import (POSITION_TOL, check_passage, n_wheels, our_ports, start_position,
-                                        vehicle_kind)
+from orchestrator.cosim.passage import POSITION_TOL, check_passage, n_wheels, our_ports, start_position, vehicle_kind
 from orchestrator.cosim.stats import CosimStats, RunCounters
 from orchestrator.cosim.units import CosimError, FmuTrack, FmuVehicle, InProcessTrack, InProcessVehicle
 from orchestrator.inputs.errors import UserInputError

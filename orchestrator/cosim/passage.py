@@ -110,10 +110,9 @@ def plan_run(scenario) -> RunPlan:
     UserInputError
         The first problem found.
     """
-    from track.layout import build_layout
-
     from orchestrator.cosim.ports import check_vehicle_fmu
     from orchestrator.inputs.sensor_layout import layout_of
+    from track.layout import build_layout
 
     layout = build_layout(scenario.track.layout)
     x0 = start_position(scenario, layout)

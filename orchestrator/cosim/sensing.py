@@ -14,11 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from track.cosim import state_rows
-from track.sensors import CompiledSensors, compile_sensors, displacement_from_acceleration, sensor_signals
-
 from orchestrator.cosim.portable import PortableScenario
 from orchestrator.inputs.sensor_layout import SensorLayout, layout_of, resolve
+from track.cosim import state_rows
+from track.sensors import CompiledSensors, compile_sensors, displacement_from_acceleration, sensor_signals
 
 SENSOR_BLOCK = 500        # output steps per block of virtual-sensor reading (bounds its temporaries)
 

@@ -34,11 +34,13 @@ class RunCounters:
         writes its record when it terminates).
     track_steps, linear_solves, contact_iterations, passes, factorizations : int or None
         The track integrator's counters (:class:`track.dynamics.Counters`: ``steps``,
-        ``solves``, ``contact_newton``, ``iterations``, ``factorizations``). In-process only:
-        ``None`` with FMUs (the track FMU keeps them inside).
+        ``solves``, ``contact_newton``, ``iterations``, ``factorizations``); with FMUs read from
+        the track FMU's counter outputs at terminate. ``None`` where a track unit reports none
+        (a track FMU built before the counters existed).
     wall_build, wall_statics, wall_factor : float or None
         Building the track model, its static equilibrium under the wheels and the
-        integrator's set-up (LU of the step matrix) [s]; in-process only (``None`` with FMUs).
+        integrator's set-up (factorization of the step matrix) [s]; ``wall_build`` in-process only
+        (the track FMU builds its model while initializing), the others from both backends.
     """
 
     steps: int

@@ -94,8 +94,8 @@ class InProcessTrack:
 
     def __init__(self, scenario, n_wheels: int, h: float, extrapolate: bool, record_every: int,
                  extrapolate_force: bool, record_columns: dict | None = None, record_rows: int = 0):
-        from track.cosim import TrackCosim
         from orchestrator.inputs.track_model import track_model
+        from track.cosim import TrackCosim
 
         t_start = time.perf_counter()
         self.model = track_model(scenario.track)

@@ -25,7 +25,8 @@ from typing import Mapping
 
 import numpy as np
 
-from orchestrator.inputs.errors import UserInputError, did_you_mean as _hint
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.errors import did_you_mean as _hint
 from orchestrator.inputs.measured_checks import MeasuredData
 
 __all__ = ["align", "resample"]

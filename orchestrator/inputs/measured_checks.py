@@ -77,9 +77,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from track.sensors import SENSOR_TYPES   # the one list of sensor types (DESIGN §4.3)
-
-from orchestrator.inputs.errors import UserInputError, did_you_mean as _hint
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.errors import did_you_mean as _hint
+from track.sensors import SENSOR_TYPES  # the one list of sensor types (DESIGN §4.3)
 
 __all__ = [
     "SENSOR_TYPES",

@@ -31,6 +31,12 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 
+from orchestrator.inputs import keypath
+from orchestrator.inputs.errors import ScenarioError, UserInputError
+from orchestrator.inputs.schema import SCHEMA, KeyDoc, scenario_keys
+from orchestrator.inputs.schema_nodes import Ctx, Invalid, describe, node_at
+from orchestrator.inputs.specs import BUILTIN_VEHICLES, PortMap, SimulationSpec, VehicleSpec
+from orchestrator.inputs.yaml_io import YamlLoader, dump_yaml, read_yaml, yaml_error_message
 from track.params import (
     BallastParams,
     LayoutParams,
@@ -40,13 +46,6 @@ from track.params import (
     TrackParams,
     VoidSpec,
 )
-
-from orchestrator.inputs import keypath
-from orchestrator.inputs.errors import ScenarioError, UserInputError
-from orchestrator.inputs.schema import SCHEMA, KeyDoc, scenario_keys
-from orchestrator.inputs.schema_nodes import Ctx, Invalid, describe, node_at
-from orchestrator.inputs.specs import BUILTIN_VEHICLES, PortMap, SimulationSpec, VehicleSpec
-from orchestrator.inputs.yaml_io import YamlLoader, dump_yaml, read_yaml, yaml_error_message
 
 __all__ = [
     "PortMap",

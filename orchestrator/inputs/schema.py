@@ -19,15 +19,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from track.layout import MIN_SLEEPERS, build_layout
-from track.params import (
-    RAIL_SECTIONS,
-    BallastParams,
-    LayoutParams,
-    RailPadParams,
-    ReductionParams,
-    TrackParams,
-)
 
 from orchestrator.inputs import keypath
 from orchestrator.inputs.schema_nodes import (
@@ -43,10 +34,10 @@ from orchestrator.inputs.schema_nodes import (
     Nullable,
     Num,
     ScalarMap,
-    describe,
     Sign,
     Str,
     dataclass_defaults,
+    describe,
 )
 from orchestrator.inputs.specs import (
     BUILTIN_VEHICLES,
@@ -55,6 +46,15 @@ from orchestrator.inputs.specs import (
     VehicleSpec,
     duration_text,
     step_estimate,
+)
+from track.layout import MIN_SLEEPERS, build_layout
+from track.params import (
+    RAIL_SECTIONS,
+    BallastParams,
+    LayoutParams,
+    RailPadParams,
+    ReductionParams,
+    TrackParams,
 )
 
 __all__ = ["SCHEMA", "KeyDoc", "scenario_keys", "MAX_SPEED", "MAX_IMPACT_ANGLE", "MAX_VOID_GAP", "N_VOID_POINTS",

@@ -29,12 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.errors import did_you_mean as _hint
+from orchestrator.inputs.track_model import track_model
+from orchestrator.inputs.yaml_io import read_yaml
 from track.model import TrackModel
 from track.sensors import GAUGE_LENGTH, RECONSTRUCTION_HIGHPASS, SENSOR_TYPES, Sensor
-
-from orchestrator.inputs.track_model import track_model
-from orchestrator.inputs.errors import UserInputError, did_you_mean as _hint
-from orchestrator.inputs.yaml_io import read_yaml
 
 log = logging.getLogger(__name__)
 

@@ -104,15 +104,40 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from orchestrator.inverse.jsonable import numpy_default
-from orchestrator.inverse.calibration_params import (DEFAULT_PARAMS, Parameter, apply_values, nominal_values,
-                                                     parse_params, values_at)
+from orchestrator.inverse.calibration_params import (
+    DEFAULT_PARAMS,
+    Parameter,
+    apply_values,
+    nominal_values,
+    parse_params,
+    values_at,
+)
 from orchestrator.inverse.calibration_report import plots, report, summarise
-from orchestrator.inverse.calibration_runs import (BASE_FILE, POLISH_MAX_NFEV, RESIDUALS_FILE, SIGNALS_FILE,
-                                                   CalibrationIncomplete, Runs, objective_run, polish, snapshot)
+from orchestrator.inverse.calibration_runs import (
+    BASE_FILE,
+    POLISH_MAX_NFEV,
+    RESIDUALS_FILE,
+    SIGNALS_FILE,
+    CalibrationIncomplete,
+    Runs,
+    objective_run,
+    polish,
+    snapshot,
+)
 from orchestrator.inverse.calibration_stages import Outcome, Setup, check_sizes, objective_of, prepare, run_stages
-from orchestrator.inverse.surrogate import (CV_FOLDS, KERNEL, LOCAL_SHARE, TRANSFORMS, Surrogate, fit_objective,
-                                            fit_surrogate, latin_hypercube, minimise_surrogate, sensitivity)
+from orchestrator.inverse.jsonable import numpy_default
+from orchestrator.inverse.surrogate import (
+    CV_FOLDS,
+    KERNEL,
+    LOCAL_SHARE,
+    TRANSFORMS,
+    Surrogate,
+    fit_objective,
+    fit_surrogate,
+    latin_hypercube,
+    minimise_surrogate,
+    sensitivity,
+)
 
 __all__ = [
     "Parameter",

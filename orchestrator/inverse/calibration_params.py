@@ -23,8 +23,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from orchestrator.inputs import keypath
-from orchestrator.inputs.errors import ScenarioError, UserInputError
 from orchestrator.inputs.causes import CATALOGUE, CauseKind
+from orchestrator.inputs.errors import ScenarioError, UserInputError
 
 __all__ = ["Parameter", "DEFAULT_PARAMS", "parse_params", "apply_values", "nominal_values", "variation",
            "values_at"]

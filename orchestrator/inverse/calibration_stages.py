@@ -20,12 +20,36 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from orchestrator.inputs.errors import UserInputError
-from orchestrator.inverse.calibration_params import Parameter, apply_values, nominal_values, parse_params, \
-    values_at, variation
-from orchestrator.inverse.calibration_runs import CalibrationIncomplete, Runs, digest, finite, objective_run, \
-    polish, snapshot
-from orchestrator.inverse.surrogate import MAX_CORNER_DIM, NARROW_CV_FACTOR, OBJECTIVE, Surrogate, corners, \
-    fit_objective, fit_surrogate, latin_hypercube, minimise_surrogate, multistarts, sensitivity
+from orchestrator.inverse.calibration_params import (
+    Parameter,
+    apply_values,
+    nominal_values,
+    parse_params,
+    values_at,
+    variation,
+)
+from orchestrator.inverse.calibration_runs import (
+    CalibrationIncomplete,
+    Runs,
+    digest,
+    finite,
+    objective_run,
+    polish,
+    snapshot,
+)
+from orchestrator.inverse.surrogate import (
+    MAX_CORNER_DIM,
+    NARROW_CV_FACTOR,
+    OBJECTIVE,
+    Surrogate,
+    corners,
+    fit_objective,
+    fit_surrogate,
+    latin_hypercube,
+    minimise_surrogate,
+    multistarts,
+    sensitivity,
+)
 
 PLAN_FILE = "stage2_plan.json"  # OUT/stage2_plan.json: the narrowed box (reused on resume)
 CALIBRATED_FILE = "calibrated.yaml"  # OUT/calibrated.yaml: the calibrated scenario

@@ -57,11 +57,11 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.cosim.sensing import variant_for_speed
-from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.causes import Candidate, candidates, kind_of
+from orchestrator.inputs.errors import UserInputError
 from orchestrator.inverse.diagnosis import Baseline, CauseFit, Diagnosis, Gain, Passage
+from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, comparison, dense_search, scalar_axis
 
@@ -225,11 +225,9 @@ def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
     Input: :func:`diagnose`'s paths and ``--validate`` texts. Output: the :class:`_Inputs`
     (``out_dir`` is created). Raises :class:`UserInputError` on bad input.
     """
-    from orchestrator.inputs.track_model import track_model
-
     from orchestrator.inputs.scenario import load_scenario
-    from orchestrator.inputs.sensor_layout import layout_of
-    from orchestrator.inputs.sensor_layout import resolve
+    from orchestrator.inputs.sensor_layout import layout_of, resolve
+    from orchestrator.inputs.track_model import track_model
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

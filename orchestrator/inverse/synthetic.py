@@ -29,13 +29,12 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from track.sensors import displacement_from_acceleration
-
+from orchestrator.cosim.sensing import simulate_sensors
 from orchestrator.inputs.causes import CATALOGUE, DRAWS
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.measured import write_measured
-from orchestrator.cosim.sensing import simulate_sensors
 from orchestrator.inputs.sensor_layout import layout_of
+from track.sensors import displacement_from_acceleration
 
 DEFAULT_NOISE = 0.01   # noise std / channel std
 MAX_RATE_SHARE = 0.5   # sampling rate <= this x the simulation's output rate (module docstring)
@@ -116,8 +115,8 @@ def synthesize(scenario, effect: Effect, out_file, *, noise: float = DEFAULT_NOI
 def synthesize_file(scenario_path, out_file, overrides=(), speed: float | None = None, noise: float | None = None,
                     seed: int = 0) -> dict:
     """:func:`synthesize` for the command line: the effect given as scenario overrides."""
-    from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
     from orchestrator.cosim.sensing import variant_for_speed
+    from orchestrator.inputs.scenario import load_scenario, scenario_from_dict
 
     scenario = load_scenario(scenario_path, overrides=list(overrides))
     if speed is not None:

@@ -14,19 +14,18 @@ from pathlib import Path
 
 import numpy as np
 
-from track.frf import receptance
-from orchestrator.inputs.track_model import track_model
-from track.statics import static_equilibrium
-from track.timegrid import step_count
-
 from orchestrator.cosim.master import merge_columns
 from orchestrator.cosim.sensing import read_sensors, sensor_columns
-from orchestrator.results import plots
-from orchestrator.results.outdir import prepare_out_dir
-from orchestrator.results.analysis import analyse, analysis_columns
-from track.model import reference_point
 from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.track_model import track_model
+from orchestrator.results import plots
+from orchestrator.results.analysis import analyse, analysis_columns
+from orchestrator.results.outdir import prepare_out_dir
 from orchestrator.results.plots_layout import plot_layout
+from track.frf import receptance
+from track.model import reference_point
+from track.statics import static_equilibrium
+from track.timegrid import step_count
 
 FRF_POINTS = 400          # frequencies of a receptance curve
 FRF_FMIN = 5.0            # Hz
@@ -195,9 +194,8 @@ def _plot_signals(out_dir: Path, scenario, lay, res) -> None:
 
 def _compiled_sensors(scenario, model):
     """The scenario's sensor layout (DESIGN.md §4.3) compiled on ``model`` (none on a track it does not fit)."""
-    from track.sensors import compile_sensors
-
     from orchestrator.inputs.sensor_layout import scenario_sensors
+    from track.sensors import compile_sensors
 
     return compile_sensors(model, scenario_sensors(scenario, model))
 

@@ -230,10 +230,10 @@ def seed000_receptance(out_dir: Path, fmax: float = FRF_FMAX, n_freqs: int = 400
     """
     from dataclasses import replace
 
-    from orchestrator.results.plots import plot_frf, save
     from orchestrator.inputs.scenario import bundled_scenario, load_scenario
-    from track.frf import receptance
     from orchestrator.inputs.track_model import track_model
+    from orchestrator.results.plots import plot_frf, save
+    from track.frf import receptance
     from track.statics import static_equilibrium
 
     sc = load_scenario(bundled_scenario(SEED000))
@@ -266,13 +266,13 @@ SEED000_VOID = (0.0, 0.4e-3, 0.9e-3, 0.9e-3, 0.4e-3, 0.0)   # m: DESIGN.md §4.2
 def seed000_pressure(out_dir: Path, workers: int | None = None, scheduler: str | None = None,
                      progress: bool = True) -> list[Path]:
     """Seed 000's measured vs nominal vs calibrated ballast pressure (module docstring)."""
-    from track.model import reference_point
+    from orchestrator.inputs.scenario import bundled_scenario, load_scenario
+    from orchestrator.inputs.sensor_layout import layout_of, resolve
     from orchestrator.inputs.track_model import track_model
     from orchestrator.inverse.diagnose import diagnose
     from orchestrator.inverse.objective import Target
-    from orchestrator.inputs.scenario import bundled_scenario, load_scenario
-    from orchestrator.inputs.sensor_layout import layout_of, resolve
     from orchestrator.inverse.synthetic import Effect, synthesize
+    from track.model import reference_point
 
     out_dir = Path(out_dir)
     path = bundled_scenario(SEED000_MEASURED)

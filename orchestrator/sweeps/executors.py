@@ -26,9 +26,16 @@ import multiprocessing
 import os
 
 from orchestrator.inputs.errors import UserInputError
+
 # Re-exported: the worker setup belongs to the executors' public face.
-from orchestrator.sweeps.workers import (check_workers, default_workers, die_with_parent, limit_threads,
-                                         setup_worker, worker_threads)
+from orchestrator.sweeps.workers import (
+    check_workers,
+    default_workers,
+    die_with_parent,
+    limit_threads,
+    setup_worker,
+    worker_threads,
+)
 
 __all__ = ["DaskExecutor", "make_executor", "check_workers", "lost_worker", "default_workers",
            "worker_threads", "setup_worker", "limit_threads", "die_with_parent"]

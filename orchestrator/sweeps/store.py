@@ -195,7 +195,9 @@ def execute_run(job: RunJob, run_fn: Callable | None) -> RunOutput:
     in the :class:`RunOutput` and the folder is removed.
     """
     if run_fn is None:
-        from orchestrator.sweeps.study import run_case as run_fn  # imported here: tests and other studies pass their own
+        from orchestrator.sweeps.study import (
+            run_case as run_fn,  # imported here: tests and other studies pass their own
+        )
     scenario = job.scenario.scenario()
     with tempfile.TemporaryDirectory(prefix=WORK_PREFIX) as work:
         folder = Path(work) / job.run_id

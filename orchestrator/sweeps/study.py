@@ -19,12 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from track.layout import build_layout
-from orchestrator.inputs.track_model import track_model
-
-from orchestrator.results.analysis import analyse
 from orchestrator.cosim.master import run_cosim
 from orchestrator.cosim.passage import END_MARGIN_SLEEPERS, start_position
+from orchestrator.inputs.track_model import track_model
+from orchestrator.results.analysis import analyse
+from track.layout import build_layout
 
 AFTER_TRANSITION = 3.0  # m: a study run ends when the front wheelset is this far behind the transfer
 

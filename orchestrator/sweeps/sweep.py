@@ -29,13 +29,30 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from orchestrator.inputs.errors import UserInputError
+
 # DASK_CONNECT_TIMEOUT is read here at each call, so that it can be set on this module (the tests shorten it).
-from orchestrator.sweeps.executors import (DASK_CONNECT_TIMEOUT, check_workers, default_workers, lost_worker,
-                                          make_executor)
+from orchestrator.sweeps.executors import (
+    DASK_CONNECT_TIMEOUT,
+    check_workers,
+    default_workers,
+    lost_worker,
+    make_executor,
+)
+
 # Re-exported: the sweep's public face (the CLI and the tests read them here).
 from orchestrator.sweeps.plan import Run, SweepPlan, expand_grid, grid_from_vary, list_from_file, plan_sweep
-from orchestrator.sweeps.store import (ID_COLUMN, INDEX_COLUMN, RESULT_FILE, RUNS_DIR, TABLE_FILE, RunJob,
-                                       SweepStore, cell_text, execute_run, write_table)
+from orchestrator.sweeps.store import (
+    ID_COLUMN,
+    INDEX_COLUMN,
+    RESULT_FILE,
+    RUNS_DIR,
+    TABLE_FILE,
+    RunJob,
+    SweepStore,
+    cell_text,
+    execute_run,
+    write_table,
+)
 
 __all__ = [
     "Run",

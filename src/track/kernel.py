@@ -54,8 +54,7 @@ except ImportError:  # pragma: no cover - numba is a dependency; the numpy path 
     numba = None
 
 from .ballast import DAMPING_ONSET
-from .contact import (CrossingGeometry, DippedJoint, Flat, crossing_heights, flat_heights, hertz,
-                      joint_heights)
+from .contact import CrossingGeometry, DippedJoint, Flat, crossing_heights, flat_heights, hertz, joint_heights
 
 KERNEL_ENV = "TURNOUT_TRACK_KERNEL"  # "numpy": the pure-numpy reference path; anything else: compiled
 PRUNE_RTOL = 1e-14  # drop |X_ij| <= this * sqrt(|X_ii X_jj|): the round-off of the reductions' products
@@ -854,8 +853,16 @@ class CompiledContacts:
     """
 
     def __init__(self, integ, sides, geometry):
-        from .dynamics import (CONTACT_NEWTON_MAX, CONTACT_REL_TOL, CONTACT_TOL, FORCE_TOL, MAX_ITER,
-                               MOTION_FLOOR, MOTION_SAFETY, REL_FORCE_TOL)
+        from .dynamics import (
+            CONTACT_NEWTON_MAX,
+            CONTACT_REL_TOL,
+            CONTACT_TOL,
+            FORCE_TOL,
+            MAX_ITER,
+            MOTION_FLOOR,
+            MOTION_SAFETY,
+            REL_FORCE_TOL,
+        )
         kernel_enabled(True)
         self.integ = integ
         model = self.model = integ.model

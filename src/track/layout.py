@@ -61,8 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from .params import (CHECK_RAIL_33C1, CONCRETE_BEARER, RAIL_SECTIONS, BeamProfile,
-                     LayoutParams)
+from .params import CHECK_RAIL_33C1, CONCRETE_BEARER, RAIL_SECTIONS, BeamProfile, LayoutParams
 
 # --- rail and flangeway dimensions -------------------------------------------------
 # Rail head widths [m]: 60E1 = 72 mm (EN 13674-1). The seat (centreline) of a rail is

@@ -26,8 +26,13 @@ Modules, along the way a file is made and used:
 from orchestrator.cosim.ssp.reader import read_ssp
 from orchestrator.cosim.ssp.runners import run_ssp_fmpy, run_ssp_libcosim
 from orchestrator.cosim.ssp.ssd import NS, SSD_FILE, Component, Connection, SspSystem
-from orchestrator.cosim.ssp.system import (default_x_start, export_ssp, system_connections, track_parameters,
-                                           vehicle_parameters)
+from orchestrator.cosim.ssp.system import (
+                                           default_x_start,
+                                           export_ssp,
+                                           system_connections,
+                                           track_parameters,
+                                           vehicle_parameters,
+)
 from orchestrator.cosim.ssp.writer import write_ssp
 
 __all__ = [

@@ -85,10 +85,9 @@ from typing import Any, Dict
 
 import numpy as np
 
-from track.timegrid import step_count
-
 from orchestrator.cosim.ssp.reader import read_ssp
 from orchestrator.cosim.ssp.ssd import NS_PER_S, step_ns
+from track.timegrid import step_count
 
 
 def _n_steps(step: float, duration: float) -> int:
@@ -178,9 +177,9 @@ def run_ssp_libcosim(ssp_file: Path, step: float, duration: float, record: list[
 
 def _libcosim_execution(ssp_file: Path, ns: int):
     """libcosim's execution of the file with a step of ``ns`` nanoseconds and a last-value observer on it."""
+    from libcosimpy._internal import get_last_error_message
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimObserver import CosimObserver
-    from libcosimpy._internal import get_last_error_message
 
     _host_pythonfmu()
     try:

@@ -65,11 +65,11 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.cosim import passage
-from orchestrator.cosim.ssp.ssd import TRACK, VEHICLE, Component, Connection, step_ns
 from orchestrator.cosim.ports import check_start_values, check_vehicle_fmu
+from orchestrator.cosim.ssp.ssd import TRACK, VEHICLE, Component, Connection, step_ns
 from orchestrator.cosim.ssp.writer import check_out_file, model_variables, write_ssp
+from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.inputs.errors import UserInputError
 
 

@@ -19,8 +19,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from orchestrator.cosim.ports import read_fmu_description
-from orchestrator.cosim.ssp.ssd import (OMS_ANNOTATION, OSP_ANNOTATION, SSD_FILE, Component, Connection, qname,
-                                       step_ns)
+from orchestrator.cosim.ssp.ssd import OMS_ANNOTATION, OSP_ANNOTATION, SSD_FILE, Component, Connection, qname, step_ns
 from orchestrator.inputs.errors import UserInputError
 
 _ZIP_DATE = (2000, 1, 1, 0, 0, 0)  # fixed member dates: the same input gives the same archive

@@ -10,10 +10,8 @@ coupling, tie to beam nodes) -> :mod:`.reduction` (sparse Craig–Bampton) ->
 gmsh and scikit-fem are imported only inside the functions that need them.
 """
 from .body import SolidRail, SolidRailParams, solid_rail
-from .coupling import (DistributingCoupling, TiedBody, distributing_coupling, rigid_motion,
-                       surface_coupling, tie)
-from .fem import (SurfaceMoments, assemble, faces_on_plane, nodes_on_line, seat_nodes, shear_coefficient,
-                  surface_moments)
+from .coupling import DistributingCoupling, TiedBody, distributing_coupling, rigid_motion, surface_coupling, tie
+from .fem import SurfaceMoments, assemble, faces_on_plane, nodes_on_line, seat_nodes, shear_coefficient, surface_moments
 from .mesh import CrossingGeometry, rail_solid_mesh, refine
 from .reduction import SparseReducedBody, craig_bampton_sparse, static_correction_sparse
 from .section import RailSection, polygon_properties, rail_60e1_like

@@ -50,9 +50,9 @@ from __future__ import annotations
 import hashlib
 import os
 import time
-from typing import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 import scipy.sparse as sp
