@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import hashlib
 import platform
-import shutil
 import subprocess
 import sys
 import uuid
 import zipfile
 from pathlib import Path
+
+from fmus.build import find_c_compiler
+from fmus.build import fmi2_headers_dir as _package_headers_dir
 
 FIXTURE_DIR = Path(__file__).resolve().parent / "fixtures" / "c_vehicle"
 C_SOURCE = FIXTURE_DIR / "c_quarter_vehicle.c"
@@ -30,18 +32,11 @@ MODEL_IDENTIFIER = "c_quarter_vehicle"
 _PLATFORMS = {"Linux": ("linux64", ".so"), "Darwin": ("darwin64", ".dylib")}
 
 
-def find_c_compiler() -> str | None:
-    """Path of the system C compiler (``cc``, else ``gcc``), or None."""
-    return shutil.which("cc") or shutil.which("gcc")
-
-
 def fmi2_headers_dir() -> Path:
-    """Folder with ``fmi2Functions.h`` & co. inside the installed FMPy package."""
-    import fmpy
-
-    path = Path(fmpy.__file__).resolve().parent / "c-code"
-    if not (path / "fmi2Functions.h").is_file():
-        raise FileNotFoundError(f"FMI 2.0 headers not found in {path}")
+    """Folder with ``fmi2Functions.h`` & co. inside the installed FMPy package (:func:`fmus.build.fmi2_headers_dir`)."""
+    path = _package_headers_dir()
+    if path is None:
+        raise FileNotFoundError("FMI 2.0 headers not found in the installed fmpy package")
     return path
 
 

@@ -245,6 +245,7 @@ def test_time_in_milliseconds_is_named(tmp_path):
     with pytest.raises(UserInputError, match=r"0\.5 s \(2 Hz\) is too coarse .* 'time \[ms\]'"):
         read_measured(path, {"A1": "pressure", "A2": "pressure"})
     path = _measured_csv(tmp_path / "ms_declared.csv", 400, 0.5, time_header="time [ms]")
+    # rel 1e-9: the rate comes from time stamps written in ms and divided by 1000 (round-off only)
     assert read_measured(path, {"A1": "pressure", "A2": "pressure"}).rate == pytest.approx(2000.0, rel=1e-9)
 
 

@@ -633,6 +633,57 @@ def work_sizes(n: int, m: int, nb: int) -> tuple[int, int]:
 
 
 @_njit
+def _workspace(work, n, m, nbal):
+    """Views of one step's work arrays in ``work`` (:func:`work_sizes`): the predictors ``qp``, ``vp``,
+    the right-hand side, a scratch vector, the linear acceleration, the stiffness-proportional
+    scratch, a unit vector, per wheel Fn, wlin, wpred, res, cpl, the m x m contact coupling G, and
+    per ballast bushing the corrections ``corr``, ``newc``."""
+    qp = work[0:n]
+    vp = work[n:2 * n]
+    rhs = work[2 * n:3 * n]
+    y = work[3 * n:4 * n]
+    acc_lin = work[4 * n:5 * n]
+    sw = work[5 * n:6 * n]
+    unit = work[6 * n:7 * n]
+    o = 7 * n
+    Fn = work[o:o + m]
+    wlin = work[o + m:o + 2 * m]
+    wpred = work[o + 2 * m:o + 3 * m]
+    res = work[o + 3 * m:o + 4 * m]
+    cpl = work[o + 4 * m:o + 5 * m]
+    G = work[o + 5 * m:o + 5 * m + m * m].reshape((m, m))
+    o2 = o + 5 * m + m * m
+    corr = work[o2:o2 + nbal]
+    newc = work[o2 + nbal:o2 + 2 * nbal]
+    return qp, vp, rhs, y, acc_lin, sw, unit, Fn, wlin, wpred, res, cpl, G, corr, newc
+
+
+@_njit
+def _passes(max_pass, c_h, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts, gd, nr, G, res, zw,
+            surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap, qp, vp, W, Ze, corr, newc, Zb, have,
+            perm, Lp, Li, Lx, dd, unit, y):
+    """The modified-Newton passes of a step: contact Newton, then the ballast bushings' change;
+    repeated (with the bushings' influence rows) while a bushing changes state.
+
+    Returns (status OK / NEWTON_FAILED / PASSES_FAILED, last force change [N], passes taken).
+    """
+    change = 0.0
+    it = 0
+    while it < max_pass:
+        it += 1
+        if not _contact_newton(c_h, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, res, zw, surf,
+                               Fc0, Fn, wlin, cpl, out, cnt):
+            return NEWTON_FAILED, change, it
+        change = _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn, Fc0, W, Ze,
+                                 corr, newc)
+        if change <= ftol:
+            return OK, change, it
+        _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Lp, Li, Lx, dd, unit, y,
+                                corr, newc, acc_lin, cnt)
+    return PASSES_FAILED, change, it
+
+
+@_njit
 def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
                  Kp, Ki, Kx, Cp, Ci, Cx,
                  D, bk, bc, bgap, Zb, have,
@@ -698,23 +749,7 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     m = zw.size
     nbal = D.size
     bh2, gh, a1 = b * h * h, g * h, 1.0 + a_
-    qp = work[0:n]
-    vp = work[n:2 * n]
-    rhs = work[2 * n:3 * n]
-    y = work[3 * n:4 * n]
-    acc_lin = work[4 * n:5 * n]
-    sw = work[5 * n:6 * n]
-    unit = work[6 * n:7 * n]
-    o = 7 * n
-    Fn = work[o:o + m]
-    wlin = work[o + m:o + 2 * m]
-    wpred = work[o + 2 * m:o + 3 * m]
-    res = work[o + 3 * m:o + 4 * m]
-    cpl = work[o + 4 * m:o + 5 * m]
-    G = work[o + 5 * m:o + 5 * m + m * m].reshape((m, m))
-    o2 = o + 5 * m + m * m
-    corr = work[o2:o2 + nbal]
-    newc = work[o2 + nbal:o2 + 2 * nbal]
+    qp, vp, rhs, y, acc_lin, sw, unit, Fn, wlin, wpred, res, cpl, G, corr, newc = _workspace(work, n, m, nbal)
     cidx = iwork
 
     _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, Cx, qp, vp, sw, y, rhs)
@@ -729,23 +764,11 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     ftol = ftol0 + frel * fmax
 
     # modified-Newton passes: they repeat only while a ballast bushing changes state
-    change = 0.0
-    it = 0
-    converged = False
-    while it < max_pass:
-        it += 1
-        if not _contact_newton(c_h, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, res, zw, surf,
-                               Fc0, Fn, wlin, cpl, out, cnt):
-            return NEWTON_FAILED, change
-        change = _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn, Fc0, W, Ze,
-                                 corr, newc)
-        if change <= ftol:
-            converged = True
-            break
-        _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Lp, Li, Lx, dd, unit, y,
-                                corr, newc, acc_lin, cnt)
-    if not converged:
-        return PASSES_FAILED, change
+    status, change, it = _passes(max_pass, c_h, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts,
+                                 gd, nr, G, res, zw, surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap,
+                                 qp, vp, W, Ze, corr, newc, Zb, have, perm, Lp, Li, Lx, dd, unit, y)
+    if status != OK:
+        return status, change
 
     _corrector(a1, bh2, gh, qp, vp, acc_lin, Fn, Fc0, W, Ze, acc1, q1, v1)
     _end_forces(fgrav, nc, cidx, D, corr, Fn, wts, gd, nr, F1, Fc1, out)

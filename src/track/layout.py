@@ -589,26 +589,66 @@ def _build_plain(p: LayoutParams) -> Layout:
 
 
 def _build_turnout(p: LayoutParams) -> Layout:
-    """Crossing panel of a turnout (see the module docstring)."""
-    geo = TurnoutGeometry.from_params(p)
-    s = geo.sign
-    g, h, N = float(p.gauge), float(p.sleeper_spacing), int(p.sleepers)
-    hw = RAIL_HEAD_WIDTH[p.rail] / 2
-    chw = CHECK_HEAD_WIDTH / 2
-    base = RAIL_SECTIONS[p.rail]
+    """Crossing panel of a turnout (see the module docstring).
 
-    x_tcp, x_tr = geo.x_tcp, geo.x_transition
+    Stages: geometry -> sleeper positions -> rail bodies with their seats -> bearers sized to
+    span them -> joints of the crossing block -> running rails per side -> plan lines.
+    """
+    geo = TurnoutGeometry.from_params(p)
+    N = int(p.sleepers)
     x_cf, x_cr = geo.x_crossing_front, geo.x_crossing_rear
+    xs, xa, xb = _sleeper_positions(p, geo)
+    specs = _turnout_rail_specs(p, geo, xa, xb)
+    rails = tuple(RailBody(sp.name, sp.kind, float(sp.x_start), float(sp.x_end), sp.profile,
+                           _seats(sp, xs)) for sp in specs)
+    _check_min_seats(rails)
+
+    # bearers: span the seats of every rail on them (canonical frame, then mirrored)
+    seat_y = [[] for _ in range(N)]
+    for r in rails:
+        for st in r.seats:
+            seat_y[st.sleeper].append(geo.sign * st.y)
+    sleepers = tuple(_bearer(j, xs[j], seat_y[j], p, geo.sign) for j in range(N))
+
+    joints = (Joint(x_cf, (("closure_through", "end"), ("closure_div", "end"), ("crossing", "start"))),
+              Joint(x_cr, (("crossing", "end"), ("rear_through", "start"), ("rear_div", "start"))))
+    nose_side, running = _running_segments(p, x_cf, x_cr)
+    lines = []
+    for sp in specs:
+        for name, kind, edge in sp.edges:
+            xg = _grid(sp.x_start, sp.x_end)
+            lines.append(PlanLine(name, kind, xg, np.asarray(edge(xg), dtype=float)))
+    lines.extend(_crossing_lines(geo, x_cf, geo.x_tcp, x_cr))
+
+    return Layout(params=p, rails=rails, sleepers=sleepers, joints=joints, running=running,
+                  crossing_side=nose_side, x_tcp=float(geo.x_tcp), x_transition=float(geo.x_transition),
+                  crossing_angle=float(geo.crossing_angle), lines=tuple(lines))
+
+
+def _sleeper_positions(p: LayoutParams, geo: TurnoutGeometry) -> tuple[np.ndarray, float, float]:
+    """Sleeper positions x [m] (the transition sleeper under the wheel transfer) and the panel's
+    ends ``xa``, ``xb`` (half a spacing beyond the outer sleepers)."""
+    h, N = float(p.sleeper_spacing), int(p.sleepers)
     # default N//2 + 1 is < N for every N >= MIN_SLEEPERS (checked in _validate)
     t = N // 2 + 1 if p.transition_sleeper is None else int(p.transition_sleeper)
-    x0 = x_tr - t * h
+    x0 = geo.x_transition - t * h
     if x0 < 0:
         raise ValueError(
             f"sleepers/transition_sleeper: the panel would start at x_0 = {x0:.3f} m, ahead of the "
             f"curve start (x = 0, the switch panel is not modelled); use fewer sleepers before "
             f"the transition sleeper (transition_sleeper = {t}, sleeper_spacing = {h} m)")
     xs = x0 + h * np.arange(N)
-    xa, xb = x0 - h / 2, float(xs[-1] + h / 2)
+    return xs, x0 - h / 2, float(xs[-1] + h / 2)
+
+
+def _turnout_rail_specs(p: LayoutParams, geo: TurnoutGeometry, xa: float, xb: float) -> list[_RailSpec]:
+    """The rails of the panel between ``xa`` and ``xb``: stock, closure, crossing block, rear and
+    check rails, each with its centre line, seat width and running edges."""
+    g = float(p.gauge)
+    hw = RAIL_HEAD_WIDTH[p.rail] / 2
+    chw = CHECK_HEAD_WIDTH / 2
+    base = RAIL_SECTIONS[p.rail]
+    x_tcp, x_cf, x_cr = geo.x_tcp, geo.x_crossing_front, geo.x_crossing_rear
 
     def through(d):
         return lambda x: geo.through_y(d) * np.ones_like(np.asarray(x, dtype=float))
@@ -628,8 +668,7 @@ def _build_turnout(p: LayoutParams) -> Layout:
     check_profile = BeamProfile(base=CHECK_RAIL_33C1)
     xc0 = max(xa, x_tcp + CHECK_RAIL_CENTRE_BEHIND_TCP - CHECK_RAIL_LENGTH / 2)
     xc1 = min(xb, x_tcp + CHECK_RAIL_CENTRE_BEHIND_TCP + CHECK_RAIL_LENGTH / 2)
-
-    specs = [
+    return [
         _RailSpec("stock_through", "rail", xa, xb, const, through(-g / 2 - hw), rail_w,
                   (("stock_through", "stock", through(-g / 2)),)),
         _RailSpec("stock_div", "rail", xa, xb, const, div(g / 2 + hw), rail_w,
@@ -651,40 +690,19 @@ def _build_turnout(p: LayoutParams) -> Layout:
                   div(g / 2 - FLANGEWAY - chw), check_w,
                   (("check_div", "check", div(g / 2 - FLANGEWAY)),)),
     ]
-    rails = tuple(RailBody(sp.name, sp.kind, float(sp.x_start), float(sp.x_end), sp.profile,
-                           _seats(sp, xs)) for sp in specs)
-    _check_min_seats(rails)
 
-    # bearers: span the seats of every rail on them (canonical frame, then mirrored)
-    seat_y = [[] for _ in range(N)]
-    for r in rails:
-        for st in r.seats:
-            seat_y[st.sleeper].append(s * st.y)
-    sleepers = tuple(_bearer(j, xs[j], seat_y[j], p, s) for j in range(N))
 
-    joints = (Joint(x_cf, (("closure_through", "end"), ("closure_div", "end"), ("crossing", "start"))),
-              Joint(x_cr, (("crossing", "end"), ("rear_through", "start"), ("rear_div", "start"))))
-
+def _running_segments(p: LayoutParams, x_cf: float, x_cr: float) -> tuple[str, dict]:
+    """(side of the crossing nose, the running rail of each side along x) for the route run."""
     nose_side = p.hand if p.route == "through" else _other(p.hand)
     leg = "through" if p.route == "through" else "div"
     other_stock = "stock_through" if p.route == "through" else "stock_div"
-    running = {
+    return nose_side, {
         nose_side: (RunningSegment(f"closure_{leg}", -math.inf, x_cf),
                     RunningSegment("crossing", x_cf, x_cr),
                     RunningSegment(f"rear_{leg}", x_cr, math.inf)),
         _other(nose_side): (RunningSegment(other_stock, -math.inf, math.inf),),
     }
-
-    lines = []
-    for sp in specs:
-        for name, kind, edge in sp.edges:
-            xg = _grid(sp.x_start, sp.x_end)
-            lines.append(PlanLine(name, kind, xg, np.asarray(edge(xg), dtype=float)))
-    lines.extend(_crossing_lines(geo, x_cf, x_tcp, x_cr))
-
-    return Layout(params=p, rails=rails, sleepers=sleepers, joints=joints, running=running,
-                  crossing_side=nose_side, x_tcp=float(x_tcp), x_transition=float(x_tr),
-                  crossing_angle=float(geo.crossing_angle), lines=tuple(lines))
 
 
 def _crossing_lines(geo: TurnoutGeometry, x_cf: float, x_tcp: float, x_cr: float) -> list:
