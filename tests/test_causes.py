@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orchestrator.inputs.causes import CATALOGUE, DRAWS, Candidate, candidates
+from orchestrator.inputs.causes import CATALOGUE, DRAWS, Candidate, candidates, kind_of
 from orchestrator.inputs.scenario import scenario_from_dict
 
 
@@ -24,6 +24,18 @@ EXPECTED_KEYS = {
     ("rail_pad_stiffness", None): "track.rail_pad.stiffness_scale",
     ("rail_pad_stiffness", 21): "track.rail_pad.overrides",
     ("impact_angle", None): "track.crossing.impact_angle",
+    ("rail_pad_damping", None): "track.rail_pad.damping",
+    ("ballast_damping", None): "track.ballast.damping_per_length",
+    ("wheelset_mass", None): "vehicle.start_values.wheelset_mass",
+    ("primary_stiffness", None): "vehicle.start_values.k1",
+    ("primary_damping", None): "vehicle.start_values.c1",
+}
+# Each cause's category, written out: what a diagnosis may name (track) and what it must not.
+EXPECTED_CATEGORY = {
+    "ballast_void": "track", "ballast_stiffness": "track", "rail_pad_stiffness": "track", "impact_angle": "track",
+    "rail_pad_damping": "track", "ballast_damping": "track",
+    "wheelset_mass": "vehicle", "primary_stiffness": "vehicle", "primary_damping": "vehicle",
+    "speed": "measurement", "channel_gain": "sensor", "channel_offset": "sensor", "channel_dead": "sensor",
 }
 
 
@@ -42,10 +54,9 @@ def test_each_cause_enters_its_scenario_key_and_reads_back(default_scenario_dict
     # nothing else changed: the variant differs from the nominal at that key only
     key = EXPECTED_KEYS[(cause, sleeper)].split(".")
     a, b = raw, new
-    for k in key[:-1]:
-        assert {x for x in a if a[x] != b[x]} == {k}
-        a, b = a[k], b[k]
-    assert {x for x in a if a[x] != b[x]} == {key[-1]}
+    for k in key:   # a key the variant creates (a vehicle start value) is absent from the nominal
+        assert {x for x in set(a) | set(b) if a.get(x) != b.get(x)} == {k}
+        a, b = a.get(k), b[k]
     # the original mapping is untouched
     assert _raw(default_scenario_dict) == raw
 
@@ -74,11 +85,72 @@ def test_candidates_place_local_causes_near_the_sensors():
     cands = candidates([5, 6], n_sleepers=8, reach=1)
     local = sorted({c.sleeper for c in cands if c.sleeper is not None})
     assert local == [4, 5, 6, 7]
-    # every registry cause appears at each scope it has
-    for name, kind in CATALOGUE.items():
+    # every screened track cause appears at each scope it has
+    track = {"ballast_void", "ballast_stiffness", "rail_pad_stiffness", "impact_angle"}
+    assert {c.cause for c in cands} == track
+    for name in track:
+        kind = CATALOGUE[name]
         has_global = Candidate(name) in cands
         has_local = Candidate(name, 5) in cands
         assert (has_global, has_local) == (kind.local in (False, None), kind.local in (True, None)), name
+
+
+def test_categories_and_what_a_diagnosis_screens():
+    """Vehicle, speed and sensor causes are never track candidates; track damping is a nuisance."""
+    assert {name: kind.category for name, kind in CATALOGUE.items()} == EXPECTED_CATEGORY
+    everything = candidates([5], n_sleepers=8, reach=0, categories=("track", "vehicle", "measurement", "sensor"))
+    assert {c.cause for c in everything} == {"ballast_void", "ballast_stiffness", "rail_pad_stiffness",
+                                            "impact_angle", "wheelset_mass", "primary_stiffness",
+                                            "primary_damping", "speed"}
+    with pytest.raises(ValueError, match="category"):
+        type(CATALOGUE["speed"])("x", False, ("x",), (0.0,), (1.0,), False, (), category="weather")
+
+
+def test_vehicle_causes_read_the_models_defaults_and_the_scenarios_start_values(default_scenario_dict):
+    """Nominal of a vehicle cause: the start value if given, else the model's default (vehicle.quarter /
+    vehicle.bogie, written out here); the variant is a vehicle the scenario loads with that value."""
+    raw = _raw(default_scenario_dict)          # fmu: bogie, no start values
+    assert raw["vehicle"]["fmu"] == "bogie"
+    bogie = {"wheelset_mass": 1500.0, "primary_stiffness": 1.2e6, "primary_damping": 1.0e4}
+    for name, default in bogie.items():
+        assert CATALOGUE[name].nominal(raw, None).tolist() == [default], name
+    raw["vehicle"]["fmu"] = "quarter"
+    assert CATALOGUE["primary_damping"].nominal(raw, None).tolist() == [2.0e4]   # QuarterParams.c1
+    raw["vehicle"]["start_values"] = {"k1": 9.0e5}
+    assert CATALOGUE["primary_stiffness"].nominal(raw, None).tolist() == [9.0e5]
+    new = CATALOGUE["wheelset_mass"].apply(raw, None, [1800.0])
+    sc = scenario_from_dict(new, source="<variant>")
+    assert dict(sc.vehicle.start_values) == {"k1": 9.0e5, "wheelset_mass": 1800.0}
+    raw["vehicle"]["fmu"] = "other.fmu"        # a third-party FMU: no known default
+    raw["vehicle"]["start_values"] = {}
+    with pytest.raises(ValueError, match="unknown"):
+        CATALOGUE["wheelset_mass"].nominal(raw, None)
+
+
+def test_speed_cause_keeps_the_stretch_of_track(default_scenario_dict):
+    """A speed variant covers the same distance: duration x speed is kept to within one output step."""
+    raw = _raw(default_scenario_dict)
+    kind = CATALOGUE["speed"]
+    v0, d0, out = raw["vehicle"]["speed"], raw["simulation"]["duration"], raw["simulation"]["output_step"]
+    for v in (0.97 * v0, 1.03 * v0):
+        new = kind.apply(raw, None, [v])
+        assert kind.nominal(new, None).tolist() == [v]
+        d = new["simulation"]["duration"]
+        assert v * d <= v0 * d0 + 1e-9 and v * d > v0 * d0 - v * out, (v, d)
+        assert abs(d / out - round(d / out)) < 1e-6    # a whole number of output steps
+        scenario_from_dict(new, source="<variant>")
+
+
+def test_sensor_faults_act_on_the_channel_not_the_scenario(default_scenario_dict):
+    raw = _raw(default_scenario_dict)
+    x = np.array([0.0, 1.0, -2.0])
+    for name, values, expected in (("channel_gain", [0.9], 0.9 * x), ("channel_offset", [0.5], x + 0.5 * 4.0),
+                                   ("channel_dead", [-0.25], np.full(3, -1.0))):
+        c = Candidate(name, channel="B3")
+        kind = kind_of(c)
+        assert kind.category == "sensor" and c.label == f"{name}@B3"
+        assert kind.apply(raw, c.channel, values) == raw            # the scenario is untouched
+        np.testing.assert_allclose(kind.site(c.channel).on(x, values, 4.0), expected)
 
 
 def test_every_draw_is_a_registry_cause_inside_its_bounds():

@@ -16,7 +16,25 @@ cause                  where    parameters (bounds)                          sce
 ``rail_pad_stiffness`` sleeper  ``stiffness_scale`` of that sleeper's pads,  ``track.rail_pad.overrides``
                                 0.05-20 (log)
 ``impact_angle``       global   ``impact_angle`` 0-30 mrad                    ``track.crossing.impact_angle``
+``rail_pad_damping``   global   ``damping`` 2e3-2e5 N s/m per seat (log)      ``track.rail_pad.damping``
+``ballast_damping``    global   ``damping_per_length`` 3e3-3e5 N s/m/m (log)  ``track.ballast.damping_per_length``
+``wheelset_mass``      vehicle  ``wheelset_mass`` 800-2500 kg                 ``vehicle.start_values.wheelset_mass``
+``primary_stiffness``  vehicle  ``k1`` 5e5-3e6 N/m per axle box (log)         ``vehicle.start_values.k1``
+``primary_damping``    vehicle  ``c1`` 3e3-8e4 N s/m per axle box (log)       ``vehicle.start_values.c1``
+``speed``              measured ``speed`` 5-120 m/s                           ``vehicle.speed`` (and the duration)
+``channel_gain``       channel  ``gain`` 0.5-2 (log): measured = g x true     (the comparison)
+``channel_offset``     channel  ``offset`` +-1 channel std                    (the comparison)
+``channel_dead``       channel  ``level`` +-1 channel std: reads a constant   (the comparison)
 =====================  =======  ===========================================  =====================
+
+Every cause has a :attr:`CauseKind.category`: ``track`` (what a diagnosis may name),
+``vehicle`` (the vehicle's parameters, known to +-20 %), ``measurement`` (the speed log)
+or ``sensor`` (a channel's fault). :func:`candidates` returns the ``track`` causes only,
+so a diagnosis never screens a vehicle or sensor difference as a track cause; the
+nuisance fit (:mod:`orchestrator.inverse.nuisance`) fits the others, and calibration's
+``--params`` may name any of them. The vehicle bounds are relative to the vehicle
+model's default (:class:`VehicleSite`): 0.6-1.6 covers the +-20 % of a vehicle
+known from its data sheet with room for the fit to show a larger difference.
 
 A cause is *screened* with one scalar magnitude on a grid (:attr:`CauseKind.grid`,
 :meth:`CauseKind.apply_scalar`) and the chosen one is then *fitted* with all its
@@ -27,7 +45,10 @@ a factor 5-10 around nominal (DESIGN.md §7 ranges), worn-nose angles up to 30 m
 
 How a cause enters the scenario is a *site* (:class:`KeySite`: one number at a key path;
 :class:`SleeperListSite`: the entry of one sleeper in a list such as
-``track.ballast.voids``), so no code here branches on a cause's name.
+``track.ballast.voids``; :class:`VehicleSite`: a vehicle start value; :class:`SpeedSite`:
+the speed over the same stretch of track; :class:`ChannelSite`: a sensor fault, which
+leaves the scenario alone and acts on one simulated channel in the comparison), so no
+code here branches on a cause's name.
 """
 from __future__ import annotations
 
@@ -107,17 +128,121 @@ class SleeperListSite:
         keypath.set(raw, self.key, sorted(entries, key=lambda e: e["sleeper"]))
 
 
+def _vehicle_defaults(fmu: str) -> dict:
+    """Field defaults of our vehicle model ``fmu`` (``quarter`` or ``bogie``); {} for a third-party FMU."""
+    import dataclasses
+
+    from vehicle.bogie import BogieParams
+    from vehicle.quarter import QuarterParams
+
+    cls = {"quarter": QuarterParams, "bogie": BogieParams}.get(fmu)
+    return {} if cls is None else {f.name: f.default for f in dataclasses.fields(cls)}
+
+
+@dataclass(frozen=True)
+class VehicleSite:
+    """A vehicle parameter: the start value ``vehicle.start_values.<name>`` (our vehicles' parameter names).
+
+    The nominal value is the scenario's start value, else our vehicle model's default
+    (:class:`vehicle.quarter.QuarterParams`, :class:`vehicle.bogie.BogieParams` name
+    ``wheelset_mass``, ``k1``, ``c1`` alike); a third-party FMU without that start value
+    has no known nominal (``ValueError``).
+    """
+
+    name: str
+
+    def scenario_key(self, sleeper: int | None) -> str:
+        return f"vehicle.start_values.{self.name}"
+
+    def nominal(self, raw: dict, sleeper: int | None, size: int) -> np.ndarray:
+        given = keypath.get(raw, self.scenario_key(sleeper))
+        if given is None:
+            given = _vehicle_defaults(keypath.get(raw, "vehicle.fmu")).get(self.name)
+        if given is None:
+            raise ValueError(f"vehicle.start_values.{self.name}: not given, and the vehicle FMU's default is unknown")
+        return np.array([given], float)
+
+    def apply(self, raw: dict, sleeper: int | None, values: np.ndarray) -> None:
+        keypath.set(raw, self.scenario_key(sleeper), float(values[0]), create=True)
+
+
+@dataclass(frozen=True)
+class SpeedSite:
+    """The vehicle's speed over the same stretch of track: ``vehicle.speed``, the duration scaled by v0 / v.
+
+    The same rule as :func:`orchestrator.cosim.sensing.variant_for_speed` (a whole number
+    of output steps), which this layer cannot import.
+    """
+
+    key: str = "vehicle.speed"
+
+    def scenario_key(self, sleeper: int | None) -> str:
+        return self.key
+
+    def nominal(self, raw: dict, sleeper: int | None, size: int) -> np.ndarray:
+        return np.array([keypath.get(raw, self.key)], float)
+
+    def apply(self, raw: dict, sleeper: int | None, values: np.ndarray) -> None:
+        v0, v = float(keypath.get(raw, self.key)), float(values[0])
+        sim = raw["simulation"]
+        every = max(1, int(round(sim["output_step"] / sim["step"])))
+        dur = sim["duration"] * v0 / v
+        sim["duration"] = float(np.floor(dur / (every * sim["step"]) + 1e-9) * every * sim["step"])
+        keypath.set(raw, self.key, v)
+
+
+@dataclass(frozen=True)
+class ChannelSite:
+    """A sensor fault: leaves the scenario alone and acts on one simulated channel in the comparison.
+
+    ``mode``: ``gain`` (measured = g x true), ``offset`` (measured = true + o x the
+    channel's spread), ``level`` (a dead channel reads the constant o x its spread).
+    The place of such a cause is a sensor id (:attr:`Candidate.channel`), not a sleeper.
+    """
+
+    mode: str
+
+    def scenario_key(self, sleeper) -> None:
+        """None: a sensor fault has no scenario key."""
+        return None
+
+    def nominal(self, raw: dict, sleeper, size: int) -> np.ndarray:
+        """A healthy channel: gain 1, no offset; a dead channel has no nominal (it reads 0 x its spread)."""
+        return np.array([1.0 if self.mode == "gain" else 0.0])
+
+    def apply(self, raw: dict, sleeper, values: np.ndarray) -> None:
+        """The scenario is unchanged (the fault is in the measurement chain)."""
+
+    def on(self, signal: np.ndarray, values, spread: float) -> np.ndarray:
+        """What the faulty channel reads when the true signal is ``signal`` (``spread``: the channel's std)."""
+        v = float(np.asarray(values, float)[0])
+        if self.mode == "gain":
+            return v * signal
+        if self.mode == "offset":
+            return signal + v * spread
+        return np.full_like(signal, v * spread)
+
+
+Site = KeySite | SleeperListSite | VehicleSite | SpeedSite | ChannelSite
+CATEGORIES = ("track", "vehicle", "measurement", "sensor")
+
+
 # ------------------------------------------------------------------------------------ causes
 @dataclass(frozen=True)
 class Candidate:
-    """One cause at one place: what the diagnosis screens, fits and ranks."""
+    """One cause at one place: what the diagnosis screens, fits and ranks.
+
+    ``channel``: the sensor id of a sensor fault (:class:`ChannelSite`), else ``None``.
+    """
 
     cause: str
     sleeper: int | None = None
+    channel: str | None = None
 
     @property
     def label(self) -> str:
-        return self.cause if self.sleeper is None else f"{self.cause}@{self.sleeper}"
+        where = self.channel if self.channel is not None else self.sleeper
+        return self.cause if where is None else f"{self.cause}@{where}"
 
 
 @dataclass(frozen=True)
@@ -149,6 +274,13 @@ class CauseKind:
     fmu_parameters : dict
         Track-FMU parameters the cause maps onto, per scope (the SSP binds them; the
         FMU declares them in :mod:`fmus.track_fmu`, which cannot import this module).
+    category : str
+        ``track``, ``vehicle``, ``measurement`` or ``sensor`` (module docstring): only
+        ``track`` causes are a diagnosis's candidates (:func:`candidates`).
+    nuisance : bool
+        A track property fitted with the nuisance parameters before any cause and never
+        screened as one (the track's damping: known only roughly, its effect broad and
+        small, it would soak up any misfit).
     """
 
     name: str
@@ -158,14 +290,20 @@ class CauseKind:
     upper: tuple
     log: bool
     grid: tuple
-    global_site: KeySite | SleeperListSite | None = None
-    local_site: KeySite | SleeperListSite | None = None
+    global_site: Site | None = None
+    local_site: Site | None = None
     unit: str = "-"
     aliases: dict = field(default_factory=dict)
     fmu_parameters: dict = field(default_factory=dict)
+    category: str = "track"
+    nuisance: bool = False
+
+    def __post_init__(self):
+        if self.category not in CATEGORIES:
+            raise ValueError(f"cause {self.name!r}: category {self.category!r} is not one of {', '.join(CATEGORIES)}")
 
     # ---------------------------------------------------------------- where it lives
-    def site(self, sleeper: int | None) -> KeySite | SleeperListSite:
+    def site(self, sleeper: int | None) -> Site:
         if self.global_site is None and self.local_site is None:
             return KeySite(self.name)
         site = self.global_site if sleeper is None else self.local_site
@@ -243,19 +381,48 @@ CATALOGUE: dict[str, CauseKind] = {k.name: k for k in (
     CauseKind("impact_angle", False, ("impact_angle",), (0.0,), (0.03,), False, (0.0, 0.012, 0.02, 0.03),
               global_site=KeySite("track.crossing.impact_angle"), unit="rad", aliases={"global": "angle"},
               fmu_parameters={"global": ("impact_angle",)}),
+    # track damping: measured pad damping is 1e4-1e5 N s/m per seat, ballast of the same order per
+    # metre (inputs.schema's plausible ranges); a decade either side of the defaults
+    CauseKind("rail_pad_damping", False, ("damping",), (2e3,), (2e5,), True, (5e3, 1e4, 4e4, 8e4),
+              global_site=KeySite("track.rail_pad.damping"), unit="N s/m", aliases={"global": "c_pad"},
+              nuisance=True),
+    CauseKind("ballast_damping", False, ("damping_per_length",), (3e3,), (3e5,), True, (7.5e3, 1.5e4, 6e4, 1.2e5),
+              global_site=KeySite("track.ballast.damping_per_length"), unit="N s/m2", aliases={"global": "c_bed"},
+              nuisance=True),
+    # the vehicle (module docstring): our models' parameter names, as start values
+    CauseKind("wheelset_mass", False, ("wheelset_mass",), (800.0,), (2500.0,), False, (1200.0, 1350.0, 1650.0, 1800.0),
+              global_site=VehicleSite("wheelset_mass"), unit="kg", aliases={"global": "m_w"}, category="vehicle"),
+    CauseKind("primary_stiffness", False, ("k1",), (5e5,), (3e6,), True, (0.8e6, 1.0e6, 1.45e6, 1.8e6),
+              global_site=VehicleSite("k1"), unit="N/m", aliases={"global": "k1"}, category="vehicle"),
+    CauseKind("primary_damping", False, ("c1",), (3e3,), (8e4,), True, (5e3, 1e4, 4e4, 6e4),
+              global_site=VehicleSite("c1"), unit="N s/m", aliases={"global": "c1"}, category="vehicle"),
+    CauseKind("speed", False, ("speed",), (5.0,), (120.0,), False, (),
+              global_site=SpeedSite(), unit="m/s", aliases={"global": "speed"}, category="measurement"),
+    # sensor faults: at a channel (Candidate.channel); gain 0.5-2 covers a mis-set amplifier or
+    # a gauge factor off by a factor 2, offsets and a dead channel's level are in channel spreads
+    CauseKind("channel_gain", True, ("gain",), (0.5,), (2.0,), True, (),
+              local_site=ChannelSite("gain"), category="sensor"),
+    CauseKind("channel_offset", True, ("offset",), (-1.0,), (1.0,), False, (),
+              local_site=ChannelSite("offset"), category="sensor"),
+    CauseKind("channel_dead", True, ("level",), (-1.0,), (1.0,), False, (),
+              local_site=ChannelSite("level"), category="sensor"),
 )}
 """Cause name -> kind. ``rail_pad_stiffness`` is global and local (``local=None``)."""
 
 
-def candidates(sensor_sleepers, n_sleepers: int, reach: int = 1) -> list[Candidate]:
-    """Every cause at every place the sensors can see.
+def candidates(sensor_sleepers, n_sleepers: int, reach: int = 1, categories=("track",)) -> list[Candidate]:
+    """Every cause of the given categories (default: the track's) at every place the sensors can see.
 
     Local causes are placed on the sleepers carrying sensors and ``reach`` sleepers
-    beyond them on either side ("near the sensors"); global causes once.
+    beyond them on either side ("near the sensors"); global causes once. Sensor faults
+    live at a channel, not a sleeper, and nuisance kinds (:attr:`CauseKind.nuisance`)
+    are fitted before any cause: neither is ever a candidate here.
     """
     near = sorted({k + d for k in sensor_sleepers for d in range(-reach, reach + 1) if 0 <= k + d < n_sleepers})
     out = []
     for name, kind in CATALOGUE.items():
+        if kind.category not in categories or kind.category == "sensor" or kind.nuisance:
+            continue
         if kind.local in (False, None):
             out.append(Candidate(name))
         if kind.local in (True, None):
@@ -335,5 +502,5 @@ DRAWS: tuple[Draw, ...] = (
 )
 
 
-__all__ = ["Candidate", "CauseKind", "CATALOGUE", "candidates", "kind_of", "KeySite", "SleeperListSite", "Draw",
-           "DRAWS", "N_GAPS", "GAP_MAX"]
+__all__ = ["Candidate", "CauseKind", "CATALOGUE", "CATEGORIES", "candidates", "kind_of", "KeySite", "SleeperListSite",
+           "VehicleSite", "SpeedSite", "ChannelSite", "Draw", "DRAWS", "N_GAPS", "GAP_MAX"]
