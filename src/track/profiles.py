@@ -175,9 +175,12 @@ class WheelProfile:
         if self.table is not None:
             return self._table_interp(s)
         if self.flange_thickness_change != 0.0:
-            lo, hi = S1002_S_MIN, S1002_S_MAX
-            # the profile at s is the new one at t with t + shift(t) = s (thinner: face moves to -s)
-            s = _invert_monotone(lambda t: t - self._flange_shift(t), s, lo - 0.01, hi + 0.01)
+            # the profile at s is the new one at t with t + shift(t) = s (thinner: face moves to -s);
+            # the shift vanishes outside (-66, -20) mm, so only s near there needs the inversion
+            dt = abs(self.flange_thickness_change)
+            m = (s > -0.066 - dt) & (s < -0.020 + dt)
+            s = s.copy()
+            s[m] = _invert_monotone(lambda t: t - self._flange_shift(t), s[m], -0.066 - 2 * dt, -0.020 + 2 * dt)
         F = 1e-3 * s1002_mm(1e3 * s)
         dh = self.flange_height - S1002_FLANGE_HEIGHT
         if dh != 0.0:
