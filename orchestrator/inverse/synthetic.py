@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from orchestrator.cosim.sensing import simulate_sensors
+from orchestrator.cosim.sensing import SensorRun, simulate_sensors
 from orchestrator.inputs.causes import CATALOGUE, DRAWS
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.measured import write_measured
@@ -60,6 +60,54 @@ class Effect:
         return {"cause": self.cause, "sleeper": self.sleeper, "parameters": dict(self.parameters)}
 
 
+# ------------------------------------------------------------------------------------------
+# The stages of a synthetic measurement (also used by orchestrator.inverse.fieldlike)
+# ------------------------------------------------------------------------------------------
+def variant_scenario(scenario, raw: dict, label: str):
+    """The scenario of a raw mapping derived from ``scenario``'s (relative files resolve as in the nominal)."""
+    from orchestrator.inputs.scenario import scenario_from_dict
+
+    base_dir = Path(scenario.source).parent if scenario.source and Path(scenario.source).exists() else Path.cwd()
+    return scenario_from_dict(raw, source=label, base_dir=base_dir)
+
+
+def truth_run(variant, layout) -> SensorRun:
+    """The truth's virtual sensors (displacement sensors as their accelerometer's signal, m/s^2).
+
+    Raises
+    ------
+    RuntimeError
+        The run stopped early (a synthetic truth must be complete).
+    """
+    run = simulate_sensors(variant, layout, reconstruct=False)
+    if run.error:
+        raise RuntimeError(f"the synthetic run failed: {run.error}")
+    return run
+
+
+def acquisition_rate(t_sim: np.ndarray, rate: float) -> float:
+    """The sampling rate [Hz]: ``rate``, capped at :data:`MAX_RATE_SHARE` x the simulation's output rate."""
+    sim_rate = round(1.0 / float(np.median(np.diff(t_sim))), 6)
+    return min(float(rate), MAX_RATE_SHARE * sim_rate)
+
+
+def acquisition_times(t_sim: np.ndarray, rate: float, crop: float) -> tuple[np.ndarray, float]:
+    """Sample times of the acquisition on the simulation's clock, and its first one, ``t0``.
+
+    The record is the simulated window less ``crop`` seconds at both ends, sampled at ``rate``.
+    """
+    t0, t1 = t_sim[0] + crop, t_sim[-1] - crop
+    return t0 + np.arange(int(np.floor((t1 - t0) * rate)) + 1) / rate, float(t0)
+
+
+def sample_signals(run: SensorRun, layout, t_acq: np.ndarray) -> dict:
+    """Every sensor's simulated signal at the acquisition times (cubic spline of the output samples).
+
+    Displacement sensors stay accelerations [m/s^2] (what their accelerometer measures).
+    """
+    return {sid: CubicSpline(run.t, run.signals[sid])(t_acq) for sid in layout.ids}
+
+
 def synthesize(scenario, effect: Effect, out_file, *, noise: float = DEFAULT_NOISE, seed: int = 0,
                trigger: float | None = None, rate: float | None = None, crop: float = 0.01) -> dict:
     """Write a synthetic measurement of ``scenario`` with ``effect`` (module docstring).
@@ -87,23 +135,16 @@ def synthesize(scenario, effect: Effect, out_file, *, noise: float = DEFAULT_NOI
     dict
         What was hidden: effect, trigger, rate, noise, seed (for the test, not the diagnosis).
     """
-    from orchestrator.inputs.scenario import scenario_from_dict
-
     rng = np.random.default_rng(seed)
     layout = layout_of(scenario)
-    base_dir = Path(scenario.source).parent if scenario.source and Path(scenario.source).exists() else Path.cwd()
-    variant = scenario_from_dict(effect.apply(scenario.raw), source=f"<{effect.cause}>", base_dir=base_dir)
-    run = simulate_sensors(variant, layout, reconstruct=False)
-    if run.error:
-        raise RuntimeError(f"the synthetic run failed: {run.error}")
-    sim_rate = round(1.0 / float(np.median(np.diff(run.t))), 6)
-    rate = min(float(layout.rate if rate is None else rate), MAX_RATE_SHARE * sim_rate)
+    run = truth_run(variant_scenario(scenario, effect.apply(scenario.raw), f"<{effect.cause}>"), layout)
+    rate = acquisition_rate(run.t, layout.rate if rate is None else rate)
     trigger = float(rng.uniform(*TRIGGER_RANGE) if trigger is None else trigger)
-    t0, t1 = run.t[0] + crop, run.t[-1] - crop
-    t_acq = t0 + np.arange(int(np.floor((t1 - t0) * rate)) + 1) / rate   # on the simulation's clock
+    t_acq, t0 = acquisition_times(run.t, rate, crop)
+    sampled = sample_signals(run, layout, t_acq)
     channels = {}
     for sid in layout.ids:
-        x = CubicSpline(run.t, run.signals[sid])(t_acq)
+        x = sampled[sid]
         if layout.types[sid] == "displacement":   # x is the accelerometer's signal
             x = displacement_from_acceleration(x, 1.0 / rate, layout.displacement_highpass)
         channels[sid] = x + rng.normal(0.0, noise * float(np.std(x)), size=x.shape)
@@ -162,4 +203,5 @@ def hidden_effect(seed: int, kind: str | None = None, sleepers=None) -> Effect:
     raise ValueError(f"unknown effect kind {kind!r} (one of {', '.join(HIDDEN_KINDS)}, none)")
 
 
-__all__ = ["Effect", "synthesize", "synthesize_file", "hidden_effect", "HIDDEN_KINDS", "DEFAULT_NOISE"]
+__all__ = ["Effect", "synthesize", "variant_scenario", "truth_run", "acquisition_rate", "acquisition_times",
+           "sample_signals", "synthesize_file", "hidden_effect", "HIDDEN_KINDS", "DEFAULT_NOISE"]
