@@ -19,6 +19,11 @@ measurement file:
 :func:`hidden_effect` is the seeded generator of the hidden-effect tests: it draws an
 effect (type, sleeper, magnitude) from ranges a crossing survey would call relevant
 and returns it to the test — the diagnosis only ever gets the file.
+
+The stages of :func:`synthesize` (:func:`variant_scenario`, :func:`truth_run`,
+:func:`acquisition_rate`, :func:`acquisition_times`, :func:`sample_signals`) are also
+those of the field-like passages of :mod:`orchestrator.inverse.fieldlike`, which run
+another model as the truth and a fuller sensor chain.
 """
 from __future__ import annotations
 
