@@ -1,50 +1,54 @@
-"""``turnout diagnose``: what the simulation gets wrong, the cause, the extended model, the gain.
+"""``turnout diagnose``: what the simulation gets wrong, the cause(s), the extended model, the gain — or the honest "none" / "unexplained".
 
-The procedure (DESIGN.md §4.5; every threshold is a named constant below):
+The procedure (DESIGN.md §4.5; every threshold is a named constant, here or in the
+module that applies it):
 
 1. **Baseline.** The nominal scenario is simulated and compared with the measurement
    (:class:`orchestrator.inverse.objective.Target`: time alignment on the accelerometers,
    per-channel nRMSE, the objective J, the noise level of each channel estimated from
-   the measurement itself, chi-square). *Where* it is wrong: per group, per sleeper
-   carrying sensors, and the time window holding 80 % of each channel's residual.
-2. **Screening.** Every candidate of the catalogue (:mod:`orchestrator.inputs.causes`: each
-   cause at each sleeper carrying sensors, and the global ones) is run at the few
-   magnitudes of its screening grid. Between grid points the *signals* are
-   interpolated (monotone cubic in the magnitude, log scale for stiffness factors),
-   so each candidate's best magnitude and objective come from a dense 1-D search
-   without further runs (:func:`orchestrator.inverse.screening.dense_search`, on
-   :data:`~orchestrator.inverse.screening.DENSE` points).
-3. **Confirmation.** The :data:`CONFIRM` best candidates are re-run at their best
-   magnitude.
-4. **Fit.** Every confirmed candidate is fitted coarsely (a void as a wedge, see
-   :func:`_stages`; the other causes have one parameter); the best of them, and up to
-   :data:`FIT` - 1 runners-up whose chi-square is within a factor :data:`FIT_RATIO` of
-   its own, then get all their parameters fitted
-   (a void's six gaps; the other causes have one) by bounded least squares
-   (:func:`scipy.optimize.least_squares`, ``trf``) on the weighted, normalised
-   residuals, with the finite-difference Jacobian's runs done in parallel
-   (:func:`orchestrator.inverse.fitting.fit_unit_cube`).
-5. **Ranking and naming.** Each candidate's evidence: its objective, the reduction of
-   the objective, chi-square and the Bayesian information criterion
-   BIC = chi2 + k ln N (k fitted parameters, N samples). The named cause is the
-   candidate with the lowest BIC, *if* it beats the nominal model by more than
-   :data:`DELTA_BIC` (Kass & Raftery 1995: a BIC difference above 10 is "very strong"
-   evidence); otherwise the residual is consistent with the noise and the cause is
-   ``none``. Candidates within :data:`DELTA_BIC` of the named one cannot be told apart
-   from it with this data: they are listed with it.
-6. **Extended model and gain.** The named cause is added to the scenario
+   the measurement itself). *Where* it is wrong: per group, per sleeper carrying
+   sensors, and the time window holding 80 % of each channel's residual.
+2. **Nuisance.** When :mod:`orchestrator.inverse.nuisance` is present, speed, time shift,
+   vehicle parameters, track damping and per-channel sensor gains are fitted first
+   (:func:`_nuisance`); the causes are then screened and fitted on that model and the
+   nuisance estimates are reported apart, never as a track cause.
+3. **Selection, round 1** (:func:`orchestrator.inverse.selection.select`): every
+   candidate of the catalogue (each local cause on the sleepers carrying sensors and
+   :data:`SENSOR_REACH` beyond them, the global ones) screened at the magnitudes of its
+   grid, a dense 1-D search between them, the best re-run and fitted, all ranked by
+   their BIC on the effective sample size.
+4. **Naming** (:func:`_pick`): the best-ranked candidate that passes the rule of
+   :mod:`orchestrator.inverse.significance` — significant on the effective sample size,
+   removes at least a quarter of the explainable misfit, never makes the fit worse, and
+   holds with any sensor group held out. Candidates within ΔBIC 10 of it on the
+   effective sample size cannot be told apart from it: its ambiguity set.
+5. **Round 2, forward selection** (:func:`_second_round`): with a cause named, the
+   :data:`SECOND_ROUND` next-best candidates of round 1 are screened and fitted on top of
+   the extended model, and a second cause is named by the same rule relative to it
+   (at most :data:`MAX_CAUSES`), each with its own gain.
+6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,
+   identifiability and which sensors would pin it:
+   :mod:`orchestrator.inverse.uncertainty`); else ``none`` when the residual is at the
+   noise level; else ``unexplained`` with where it lives (channels, time window, the
+   sleeper nearest the wheel then, frequency band:
+   :func:`orchestrator.inverse.significance.locate`).
+7. **Extended model and gain.** The named causes are added to the scenario
    (``extended.yaml``); gain = 1 - J_after / J_before, per channel and in total; for
    further measured passages at other speeds (``--validate FILE@SPEED``) the same
    before/after comparison without refitting.
 
+A diagnosis never ends in a traceback from a variant: a run that stops early, a
+non-finite signal or a comparison window outside the record drops that variant with a
+logged reason (:func:`orchestrator.inverse.screening.checked_comparison`); the answer
+lists them (``dropped``). The nominal run itself failing is a :class:`UserInputError`.
+
 The diagnosis sees only the scenario and the measurement files: the catalogue, the
-grids and the thresholds are fixed here, the same for every measurement.
+grids and the thresholds are fixed, the same for every measurement.
 
 :func:`diagnose` runs these steps as a sequence of stages (one function each, from
 :func:`_read_inputs` to :func:`_write_outputs`) and returns the typed result,
 :class:`orchestrator.inverse.diagnosis.Diagnosis`, whose ``to_json()`` is
-``diagnosis.json``; the runs and the screening search are in
-:mod:`orchestrator.inverse.screening`, the report in :mod:`orchestrator.inverse.diagnose_report`.
+``diagnosis.json``; the report is :mod:`orchestrator.inverse.diagnose_report`.
 """
 from __future__ import annotations
 
@@ -60,18 +64,17 @@ import numpy as np
 from orchestrator.cosim.sensing import variant_for_speed
 from orchestrator.inputs.causes import Candidate, candidates, kind_of
 from orchestrator.inputs.errors import UserInputError
-from orchestrator.inverse.diagnosis import Baseline, CauseFit, Diagnosis, Gain, Passage
+from orchestrator.inverse.diagnosis import Answer, Baseline, CauseFit, Diagnosis, Gain, Passage
 from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.inverse.objective import Comparison, Target
-from orchestrator.inverse.screening import Evaluated, Pool, comparison, dense_search, scalar_axis
+from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
+from orchestrator.inverse.selection import CONFIRM, FIT, Round, select
+from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, MIN_SHARE, NONE_MARGIN, Evidence, assess,
+                                               at_noise_level, locate)
 
-DELTA_BIC = 10.0     # BIC difference for "very strong" evidence (Kass & Raftery 1995)
-CONFIRM = 4          # candidates re-run at their screened optimum
-FIT = 2              # candidates whose full parameter set is fitted, at most ...
-FIT_RATIO = 2.0      # ... of those whose confirmed chi-square is within this factor of the best's
-FIT_MAX_NFEV = 5     # least-squares iterations of a coarse fit (each: one run + a parallel Jacobian) ...
-FINE_MAX_NFEV = 8    # ... and of the fine stages (six gaps)
-SENSOR_REACH = 0     # local causes on the sleepers carrying sensors +- this many
+SENSOR_REACH = 1     # local causes on the sleepers carrying sensors +- this many (an effect just beyond them)
+MAX_CAUSES = 2       # causes named at most (forward selection)
+SECOND_ROUND = 4     # candidates of round 1 (next best) screened again on top of the first named cause
 
 
 def _parse_validate(texts) -> list[tuple[Path, float]]:
@@ -111,73 +114,8 @@ def _where(cmp: Comparison, sensors) -> dict:
                                 "window": cmp.channels[k]["window"]} for k in worst]}
 
 
-def _stages(kind) -> list:
-    """Coarse-to-fine parameterisations of a fit: (number of parameters, map to the unit cube).
-
-    A void is first fitted as a wedge (the gaps linear between the sleeper's ends: 2
-    parameters, well conditioned, covering a uniform gap) and then point by point from
-    there; six free gaps straight from a uniform start stall in the non-smooth contact
-    response. The other causes have one parameter.
-    """
-    n = len(kind.names)
-    if n == 1:
-        return [(1, lambda p: np.asarray(p, float))]
-    return [(2, lambda p: np.linspace(p[0], p[1], n)), (n, lambda p: np.asarray(p, float))]
-
-
-def _fit(pool: Pool, target: Target, raw: dict, start: Evaluated, stages: slice = slice(None),
-         max_nfev: int = FIT_MAX_NFEV) -> Evaluated:
-    """A candidate's parameters by bounded least squares, through ``_stages(kind)[stages]`` (module doc, step 4)."""
-    from orchestrator.inverse.fitting import fit_unit_cube
-
-    c = start.candidate
-    kind = kind_of(c)
-    cache: dict[bytes, Comparison] = {}
-
-    def runs(us: list[np.ndarray]) -> list[Comparison]:
-        todo = list({u.tobytes(): u for u in us if u.tobytes() not in cache}.values())
-        if todo:
-            out = pool.map([kind.apply(raw, c.sleeper, kind.from_unit(u)) for u in todo])
-            for u, run in zip(todo, out):
-                cache[u.tobytes()] = comparison(target, run)
-        return [cache[u.tobytes()] for u in us]
-
-    u_best = np.clip(kind.to_unit(start.values), 0.0, 1.0)
-    k = start.k
-    for n, to_u in _stages(kind)[stages]:
-        k = n
-
-        def batch(ps, to_u=to_u):
-            return [target.weighted_residuals(cm) for cm in runs([np.clip(to_u(p), 0.0, 1.0) for p in ps])]
-
-        p0 = u_best[[0, -1]] if n == 2 else u_best   # the wedge starts from the current ends
-        fit_unit_cube(batch, p0, max_nfev=max_nfev)
-        u_best = np.frombuffer(min(cache, key=lambda b: cache[b].chi2), dtype=float).copy()
-    best = cache[u_best.tobytes()]
-    if best.chi2 > start.cmp.chi2:   # the fit never did better than its start
-        return Evaluated(c, start.values, start.cmp, k, "fitted")
-    return Evaluated(c, kind.from_unit(u_best), best, k, "fitted")
-
-
-def _gain(after: float, before: float) -> float:
-    """1 - after / before (an objective or an nRMSE), 0 when ``before`` is 0."""
-    return 1.0 - after / before if before > 0 else 0.0
-
-
-def _entry(e: Evaluated, base: Evaluated, best_bic: float | None, twins: list[str]) -> CauseFit:
-    """The typed result of one evaluated candidate, with its evidence against the nominal ``base``."""
-    return CauseFit(
-        e.candidate.cause, kind_of(e.candidate).parameters(e.values), e.cmp.objective,
-        _gain(e.cmp.objective, base.cmp.objective),
-        {"stage": e.stage, "objective_reduction": base.cmp.objective - e.cmp.objective,
-         "chi2": e.cmp.chi2, "n_samples": e.cmp.n, "n_parameters": e.k, "bic": e.bic(),
-         "delta_bic_vs_nominal": base.bic() - e.bic(),
-         "delta_bic_vs_best": None if best_bic is None else e.bic() - best_bic,
-         "indistinguishable_from": twins},
-        sleeper=None if e.candidate.sleeper is None else int(e.candidate.sleeper))
-
-
 # ------------------------------------------------------------------------------------ stages
+
 @dataclass
 class _Inputs:
     """What the stages of a diagnosis read: the nominal scenario, its sensors, the measurements, the candidates.
@@ -197,9 +135,9 @@ class _Inputs:
     validations : list of (Target, Path, float)
         Further passages: their target, file and speed [m/s].
     cands : list of Candidate
-        The catalogue's candidates at the sensors.
-    axes : dict
-        Candidate -> (screening magnitudes with the nominal one, the nominal magnitude).
+        The catalogue's candidates at the sensors (and :data:`SENSOR_REACH` beyond).
+    sleeper_x : ndarray
+        Track coordinate of every sleeper [m], by index (where an unexplained residual lives).
     """
 
     scenario_path: object
@@ -211,7 +149,7 @@ class _Inputs:
     target: Target
     validations: list
     cands: list
-    axes: dict
+    sleeper_x: np.ndarray
 
     @property
     def raw0(self) -> dict:
@@ -233,7 +171,6 @@ def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
     out_dir.mkdir(parents=True, exist_ok=True)
     validations = _parse_validate(validate)
     scenario = load_scenario(scenario_path)
-    raw0 = scenario.raw
     layout = layout_of(scenario)
     model = track_model(scenario.track)
     sensors = resolve(layout, model)
@@ -245,8 +182,9 @@ def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
                              f"(simulation.output_step <= {0.5 / target.measured.rate:.3g} s)")
     val_targets = [(Target.read(p, layout), p, v) for p, v in validations]
     cands = candidates(_sensor_sleepers(sensors), len(model.layout.sleepers), SENSOR_REACH)
-    axes = {c: scalar_axis(kind_of(c), raw0, c.sleeper) for c in cands}
-    return _Inputs(scenario_path, measured_path, out_dir, scenario, layout, sensors, target, val_targets, cands, axes)
+    sleeper_x = np.array([s.x for s in model.layout.sleepers], float)
+    return _Inputs(scenario_path, measured_path, out_dir, scenario, layout, sensors, target, val_targets, cands,
+                   sleeper_x)
 
 
 def _baseline(pool: Pool, inp: _Inputs) -> tuple[Evaluated, Baseline]:
@@ -254,194 +192,213 @@ def _baseline(pool: Pool, inp: _Inputs) -> tuple[Evaluated, Baseline]:
 
     Input: the pool, the inputs. Output: the nominal model's :class:`Evaluated` and its
     :class:`Baseline`, which is written to ``baseline.json`` at once (so a diagnosis that
-    fails later keeps it). Aligns ``inp.target`` in time on the nominal run.
+    fails later keeps it). Aligns ``inp.target`` in time on the nominal run. Raises
+    :class:`UserInputError` when the nominal run cannot be compared with the measurement.
     """
     base_run = pool.map([inp.raw0])[0]
     if base_run.error:
         raise UserInputError(f"{inp.scenario_path}: the nominal run stopped early: {base_run.error}")
     inp.target.align_to(base_run.t, base_run.signals)
-    base = Evaluated(Candidate("none"), np.zeros(0), comparison(inp.target, base_run), 0, "nominal")
+    cmp, why = checked_comparison(inp.target, base_run)
+    if cmp is None:
+        raise UserInputError(f"{inp.measured_path}: cannot be compared with the nominal run: {why}")
+    base = Evaluated(Candidate("none"), np.zeros(0), cmp, 0, "nominal")
     text = json.dumps({**base.cmp.summary(), "bic": base.bic(), "where": _where(base.cmp, inp.sensors),
                        "noise_sigma": inp.target.sigma}, indent=1, default=numpy_default)
     (inp.out_dir / "baseline.json").write_text(text)
     return base, Baseline.from_json(json.loads(text))
 
 
-def _screen(pool: Pool, inp: _Inputs, base: Evaluated) -> dict[Candidate, dict[float, dict]]:
-    """Step 2, runs: every candidate at the magnitudes of its screening grid, in one batch.
+def _nuisance(pool: Pool, inp: _Inputs, base: Evaluated) -> tuple[dict, Evaluated, dict | None]:
+    """Step 2: the nuisance parameters, fitted before any cause (:mod:`orchestrator.inverse.nuisance`).
 
-    Input: the pool, the inputs, the nominal evaluation. Output: candidate -> magnitude
-    -> simulated signals on the measured time base (the nominal magnitude's are the
-    nominal run's).
+    Output: the reference scenario the causes are screened on, its evaluation, and the
+    nuisance estimates' JSON (None, and the nominal scenario, when the nuisance stage is
+    not part of this installation). Sets the channel gains on ``inp.target``.
     """
-    jobs = [(c, x) for c in inp.cands for x in inp.axes[c][0] if abs(x - inp.axes[c][1]) > 1e-12]
-    runs = pool.map([kind_of(c).apply_scalar(inp.raw0, c.sleeper, x) for c, x in jobs])
-    screened: dict[Candidate, dict[float, dict]] = {c: {inp.axes[c][1]: base.cmp.simulated} for c in inp.cands}
-    for (c, x), run in zip(jobs, runs):
-        screened[c][x] = comparison(inp.target, run).simulated
-    return screened
+    try:
+        from orchestrator.inverse.nuisance import fit_nuisance
+    except ImportError:
+        return inp.raw0, base, None
+    nz = fit_nuisance(pool, inp.target, inp.raw0, base.cmp)
+    return nz.raw, Evaluated(Candidate("none"), np.zeros(0), nz.cmp, 0, "nominal"), nz.to_json()
 
 
-def _search(inp: _Inputs, screened: dict[Candidate, dict[float, dict]]) -> dict[Candidate, Evaluated]:
-    """Step 2, no runs: each candidate's best magnitude by the dense 1-D search between its screening runs.
+def _pick(rd: Round, target: Target) -> tuple[Evaluated | None, Evidence | None, dict]:
+    """Step 4: the best-ranked candidate of a round that passes the rule, its evidence, and every tried one's.
 
-    Input: the inputs, :func:`_screen`'s signals. Output: candidate -> its ``screened``
-    evaluation (one parameter).
+    Output: (the named candidate or None, its evidence (or the best one's when none
+    passes), candidate -> evidence of the fitted and confirmed candidates).
     """
-    dense = {}
-    for c in inp.cands:
-        xs = np.array(sorted(screened[c]))
-        x_best, cmp = dense_search(inp.target, kind_of(c), xs, [screened[c][x] for x in xs])
-        dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best), cmp, 1, "screened")
-    return dense
+    tried = {e.candidate: assess(e.cmp, e.k, rd.reference.cmp, rd.k_ref, target) for e in rd.real}
+    for e in rd.real:
+        if tried[e.candidate].passes:
+            return e, tried[e.candidate], tried
+    return None, (tried[rd.real[0].candidate] if rd.real else None), tried
 
 
-def _confirm(pool: Pool, inp: _Inputs, dense: dict[Candidate, Evaluated]) -> dict[Candidate, Evaluated]:
-    """Step 3: the :data:`CONFIRM` best screened candidates (by BIC) re-run at their best magnitude.
-
-    Input: the pool, the inputs, :func:`_search`'s evaluations. Output: candidate -> its
-    ``confirmed`` evaluation, best screened first.
-    """
-    top = sorted(inp.cands, key=lambda c: dense[c].bic())[:CONFIRM]
-    pool.expect(len(top))
-    runs = pool.map([kind_of(c).apply(inp.raw0, c.sleeper, dense[c].values) for c in top])
-    return {c: Evaluated(c, dense[c].values, comparison(inp.target, r), 1, "confirmed") for c, r in zip(top, runs)}
-
-
-def _coarse_fits(pool: Pool, inp: _Inputs, confirmed: dict[Candidate, Evaluated]) -> dict[Candidate, Evaluated]:
-    """Step 4, first stage: every confirmed candidate fitted coarsely (:func:`_stages`, a void as a wedge).
-
-    Input: the pool, the inputs, :func:`_confirm`'s evaluations. Output: candidate -> its
-    ``fitted`` evaluation, in the same order.
-    """
-    for c in confirmed:
-        pool.expect(FIT_MAX_NFEV * (_stages(kind_of(c))[0][0] + 1))
-    return {c: _fit(pool, inp.target, inp.raw0, confirmed[c], slice(0, 1)) for c in confirmed}
-
-
-def _fine_fits(pool: Pool, inp: _Inputs, coarse: dict[Candidate, Evaluated]) -> dict[Candidate, Evaluated]:
-    """Step 4, finer stages: all parameters of the best coarse fit and of up to :data:`FIT` - 1 runners-up
-    whose chi-square is within :data:`FIT_RATIO` of its own.
-
-    Input: the pool, the inputs, :func:`_coarse_fits`' evaluations. Output: the same
-    mapping with the finely fitted candidates replaced.
-    """
-    by_fit = sorted(coarse, key=lambda c: coarse[c].bic())
-    lead = coarse[by_fit[0]].cmp.chi2
-    fitted = dict(coarse)
-    for c in [c for c in by_fit if coarse[c].cmp.chi2 <= FIT_RATIO * lead][:FIT]:
-        stages = _stages(kind_of(c))
-        if len(stages) > 1:
-            pool.expect(FINE_MAX_NFEV * sum(n + 1 for n, _ in stages[1:]))
-            fitted[c] = _fit(pool, inp.target, inp.raw0, coarse[c], slice(1, None), FINE_MAX_NFEV)
-    return fitted
+def _same_site(a: Candidate, b: Candidate) -> bool:
+    """The two candidates set the same scenario entry (one would overwrite the other)."""
+    return kind_of(a).scenario_key(a.sleeper) == kind_of(b).scenario_key(b.sleeper) and a.sleeper == b.sleeper
 
 
 @dataclass
-class _Ranking:
-    """The candidates ranked (module doc, step 5).
+class _Named:
+    """A named cause: its evaluation, evidence, round, and the reference scenario with it added."""
 
-    Attributes
-    ----------
-    ranked : list of Evaluated
-        Every candidate's last evaluation: the fitted and confirmed ones by BIC, then the
-        screened ones by BIC.
-    best : Evaluated
-        The fitted or confirmed candidate of lowest BIC.
-    significant : bool
-        ``best`` beats the nominal model by more than :data:`DELTA_BIC`.
-    real : list of Evaluated
-        The fitted and confirmed candidates of ``ranked``.
-    twins : dict
-        Candidate of ``real`` -> labels of the others within :data:`DELTA_BIC` of it.
+    e: Evaluated
+    evidence: Evidence
+    round: Round
+    raw: dict
+
+
+def _rounds(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated) -> tuple[list[_Named], list[Round], dict]:
+    """Steps 3-5: round 1 over all candidates, then forward selection (module doc).
+
+    Output: the named causes (in order), the rounds, candidate -> evidence of every
+    candidate tried for naming (per round: label keys ``round:label``).
     """
-
-    ranked: list
-    best: Evaluated
-    significant: bool
-    real: list
-    twins: dict
-
-
-def _rank(base: Evaluated, inp: _Inputs, dense: dict, confirmed: dict, fitted: dict) -> _Ranking:
-    """Step 5, ranking: every candidate's last evaluation by BIC, the best, and who cannot be told apart.
-
-    Input: the nominal evaluation, the inputs, the evaluations of steps 2-4. Output: the
-    :class:`_Ranking`.
-    """
-    final = {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in inp.cands}
-    ranked = sorted(final.values(), key=lambda e: (e.stage not in ("fitted", "confirmed"), e.bic()))
-    best = min((e for e in ranked if e.stage in ("fitted", "confirmed")), key=lambda e: e.bic())
-    significant = base.bic() - best.bic() > DELTA_BIC
-    real = [e for e in ranked if e.stage in ("fitted", "confirmed")]
-    twins = {e.candidate: [o.candidate.label for o in real if o is not e and abs(o.bic() - e.bic()) < DELTA_BIC]
-             for e in real}
-    return _Ranking(ranked, best, significant, real, twins)
+    named: list[_Named] = []
+    rounds = [select(pool, inp.target, raw, ref, 0, inp.cands)]
+    evidence = {}
+    while True:
+        rd = rounds[-1]
+        pick, ev, tried = _pick(rd, inp.target)
+        evidence.update({(len(rounds), c): v for c, v in tried.items()})
+        if pick is None:
+            break
+        c = pick.candidate
+        raw = kind_of(c).apply(raw, c.sleeper, pick.values)
+        named.append(_Named(pick, ev, rd, raw))
+        if len(named) >= MAX_CAUSES:
+            break
+        nxt = _second_round(rounds[0], named)
+        if not nxt:
+            break
+        rounds.append(select(pool, inp.target, raw, pick, sum(n.e.k for n in named), nxt))
+    return named, rounds, evidence
 
 
-def _named(base: Evaluated, rk: _Ranking) -> CauseFit:
-    """Step 5, naming: the best candidate with its ambiguity set if it is significant, else ``none``.
+def _second_round(first: Round, named: list[_Named]) -> list[Candidate]:
+    """Step 5: the :data:`SECOND_ROUND` next-best candidates of round 1, none on a named cause's site."""
+    taken = [n.e.candidate for n in named]
+    out = [e.candidate for e in first.ranked if not any(_same_site(e.candidate, t) for t in taken)]
+    return out[:SECOND_ROUND]
 
-    Input: the nominal evaluation, the ranking. Output: the named cause.
-    """
-    best = rk.best
-    twins = rk.twins.get(best.candidate, [])
-    if not rk.significant:
-        return CauseFit("none", {}, base.cmp.objective, 0.0,
-                        {"best_candidate": best.candidate.label, "delta_bic_vs_nominal": base.bic() - best.bic(),
-                         "threshold": DELTA_BIC,
-                         "reason": "no candidate explains the residual better than the noise does"})
-    named = _entry(best, base, best.bic(), twins)
-    sleepers = sorted(({named.sleeper} | {e.candidate.sleeper for e in rk.real
-                                          if e.candidate.label in twins and e.candidate.cause == best.candidate.cause})
+
+def _entry(e: Evaluated, rd: Round, rnd: int, ev: Evidence | None) -> CauseFit:
+    """The typed result of one evaluated candidate of round ``rnd``, with its evidence."""
+    ref = rd.reference.cmp
+    best_bic = rd.bic[rd.real[0].candidate] if rd.real else None
+    bic = rd.bic.get(e.candidate)
+    evidence = {"round": rnd, "stage": e.stage, "objective_reference": ref.objective,
+                "objective_reduction": ref.objective - e.cmp.objective, "chi2": e.cmp.chi2,
+                "n_samples": e.cmp.n, "n_parameters": e.k, "bic_eff": bic,
+                "delta_bic_eff_vs_best": None if bic is None else bic - best_bic,
+                "indistinguishable_from": rd.twins.get(e.candidate, [])}
+    if ev is not None:
+        evidence["significance"] = ev.to_json()
+    return CauseFit(e.candidate.cause, kind_of(e.candidate).parameters(e.values), e.cmp.objective,
+                    1.0 - e.cmp.objective / ref.objective if ref.objective > 0 else 0.0, evidence,
+                    sleeper=None if e.candidate.sleeper is None else int(e.candidate.sleeper))
+
+
+def _named_entry(n: _Named, rnd: int) -> CauseFit:
+    """A named cause: its entry, its ambiguity set and its 90 % intervals (:mod:`orchestrator.inverse.uncertainty`)."""
+    from orchestrator.inverse.uncertainty import cause_uncertainty
+
+    entry = _entry(n.e, n.round, rnd, n.evidence)
+    twins = n.round.twins.get(n.e.candidate, [])
+    sleepers = sorted(({entry.sleeper} | {o.candidate.sleeper for o in n.round.real
+                                          if o.candidate.label in twins and o.candidate.cause == n.e.candidate.cause})
                       - {None})
-    named.ambiguity = {"candidates": [best.candidate.label] + twins, "sleepers": sleepers}
-    return named
+    entry.ambiguity = {"candidates": [n.e.candidate.label] + twins, "sleepers": sleepers}
+    fitter = n.round.fitters.get(n.e.candidate)
+    if fitter is not None:
+        entry.uncertainty = cause_uncertainty(fitter, n.e.values, n.evidence.n_eff)
+    return entry
 
 
-def _extend(inp: _Inputs, rk: _Ranking) -> tuple[dict, Path]:
-    """Step 6: the extended model, the named cause added to the nominal scenario (a copy of it for ``none``).
+def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], final: Comparison,
+            best: Evidence | None) -> Answer:
+    """Step 6: named, ``none`` or ``unexplained`` (module doc), with where the residual lives when above noise.
 
-    Input: the inputs, the ranking. Output: the extended raw scenario and the path of
-    ``extended.yaml``, written into the output folder.
+    ``ref``/``ref_raw``: the model the causes were added to (nominal, or with the nuisance
+    estimates); ``final``: the comparison of the model with all named causes; ``best``: the
+    evidence of round 1's best candidate (why nothing was named).
     """
+    quiet, j_noise = at_noise_level(final, inp.target)
+    where = None if quiet else locate(final, inp.target, inp.sensors, inp.sleeper_x,
+                                      float(ref_raw["simulation"]["x_start"]), float(ref_raw["vehicle"]["speed"]))
+    if named:
+        text = "; ".join(f"{c.cause}{'' if c.sleeper is None else f' at sleeper {c.sleeper}'} removes "
+                         f"{100 * c.gain:.1f} % of the objective" for c in named)
+        rest = "the rest is at the noise level" if quiet else "a residual above the noise remains (see where)"
+        return Answer("named", named, f"{text}; {rest}.", where)
+    why = "; ".join(best.reasons) if best is not None else "no candidate could be evaluated"
+    if at_noise_level(ref.cmp, inp.target)[0]:
+        return Answer("none", [], f"the residual is at the noise level (J {ref.cmp.objective:.4g} <= "
+                                  f"{1 + NONE_MARGIN:g} x the noise's {j_noise:.4g})", None)
+    return Answer("unexplained", [], f"the residual is above the noise (J {ref.cmp.objective:.4g}, noise "
+                                     f"{j_noise:.4g}) and no catalogue cause explains it: the best candidate {why}",
+                  where)
+
+
+def _legacy_named(answer: Answer, base: Evaluated, best: Evidence | None, best_label: str | None) -> CauseFit:
+    """``named_cause`` of the first schema: the first named cause, or ``none`` / ``unexplained`` with the reason."""
+    if answer.causes:
+        return answer.causes[0]
+    return CauseFit(answer.kind, {}, base.cmp.objective, 0.0,
+                    {"best_candidate": best_label, "delta_bic_vs_nominal": None if best is None else best.delta_bic,
+                     "threshold": DELTA_BIC, "reason": answer.reason})
+
+
+def _extend(inp: _Inputs, ext_raw: dict) -> Path:
+    """Step 7: write the extended model (the reference with all named causes) as ``extended.yaml``."""
     from orchestrator.inputs.scenario import dump_scenario, scenario_from_dict
 
-    best = rk.best
-    ext_raw = kind_of(best.candidate).apply(inp.raw0, best.candidate.sleeper, best.values) if rk.significant \
-        else copy.deepcopy(inp.raw0)
-    ext_scenario = scenario_from_dict(ext_raw, source=str(inp.scenario_path), base_dir=Path(inp.scenario_path).parent)
-    return ext_raw, dump_scenario(ext_scenario, inp.out_dir / "extended.yaml")
+    ext_scenario = scenario_from_dict(copy.deepcopy(ext_raw), source=str(inp.scenario_path),
+                                      base_dir=Path(inp.scenario_path).parent)
+    return dump_scenario(ext_scenario, inp.out_dir / "extended.yaml")
 
 
 def _validate(pool: Pool, inp: _Inputs, ext_raw: dict) -> list[Passage]:
-    """Step 6, further passages: nominal and extended model at each passage's speed, compared without refitting.
+    """Step 7, further passages: nominal and extended model at each passage's speed, compared without refitting.
 
     Input: the pool, the inputs, the extended raw scenario. Output: one :class:`Passage`
-    per ``--validate`` file.
+    per ``--validate`` file that could be compared (the others are dropped with their reason).
     """
     validation = []
     for vt, vpath, speed in inp.validations:
         pool.expect(2)
         r_before, r_after = pool.map([variant_for_speed(inp.raw0, speed), variant_for_speed(ext_raw, speed)])
+        if r_before.error:
+            pool.drop(f"validation {vpath}@{speed:g}", "validation", f"the nominal run stopped early: {r_before.error}")
+            continue
         vt.align_to(r_before.t, r_before.signals)
-        cb, ca = comparison(vt, r_before), comparison(vt, r_after)
-        validation.append(Passage(str(vpath), speed, cb.objective, ca.objective, _gain(ca.objective, cb.objective),
+        (cb, why_b), (ca, why_a) = checked_comparison(vt, r_before), checked_comparison(vt, r_after)
+        if cb is None or ca is None:
+            pool.drop(f"validation {vpath}@{speed:g}", "validation", why_b or why_a)
+            continue
+        validation.append(Passage(str(vpath), speed, cb.objective, ca.objective,
+                                  1.0 - ca.objective / cb.objective if cb.objective > 0 else 0.0,
                                   {k: {"nrmse_before": cb.channels[k]["nrmse"], "nrmse_after": ca.channels[k]["nrmse"]}
                                    for k in cb.channels}))
     return validation
 
 
 def _total_gain(before: Comparison, after: Comparison) -> Gain:
-    """Step 6, gain: of the extended model (``after``) over the nominal one (``before``), total and per channel."""
-    return Gain(_gain(after.objective, before.objective),
-                {k: _gain(after.channels[k]["nrmse"], v["nrmse"]) for k, v in before.channels.items()})
+    """Step 7, gain: of the extended model (``after``) over the nominal one (``before``), total and per channel."""
+    return Gain(1.0 - after.objective / before.objective if before.objective > 0 else 0.0,
+                {k: 1.0 - after.channels[k]["nrmse"] / v["nrmse"] if v["nrmse"] > 0 else 0.0
+                 for k, v in before.channels.items()})
 
 
 def _settings(cands: list[Candidate]) -> dict:
-    """The thresholds of this module and the candidates' labels (``diagnosis.json`` ``settings``)."""
-    return {"delta_bic": DELTA_BIC, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH,
-            "candidates": [c.label for c in cands]}
+    """The thresholds of the diagnosis and the candidates' labels (``diagnosis.json`` ``settings``)."""
+    return {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL, "none_margin": NONE_MARGIN,
+            "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH, "max_causes": MAX_CAUSES,
+            "second_round": SECOND_ROUND, "candidates": [c.label for c in cands]}
 
 
 def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: Comparison) -> None:
@@ -453,6 +410,20 @@ def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: C
 
     (inp.out_dir / "diagnosis.json").write_text(json.dumps(result.to_json(), indent=1, default=numpy_default))
     write_report(inp.out_dir, result, inp.target, before, after, inp.layout)
+
+
+def _result(inp: _Inputs, base: Evaluated, ref: Evaluated, ref_raw: dict, named: list, rounds: list,
+            evidence: dict) -> tuple[Answer, list[CauseFit], CauseFit, Comparison]:
+    """Steps 4-6 as typed results: the answer, every candidate's entry, ``named_cause``, the final comparison."""
+    named_entries = [_named_entry(n, i + 1) for i, n in enumerate(named)]
+    final = named[-1].e.cmp if named else ref.cmp
+    first = rounds[0]
+    best_ev = evidence.get((1, first.real[0].candidate)) if first.real else None
+    answer = _answer(inp, ref, ref_raw, named_entries, final, best_ev)
+    causes = [_entry(e, rd, i + 1, evidence.get((i + 1, e.candidate))) for i, rd in enumerate(rounds)
+              for e in rd.ranked]
+    legacy = _legacy_named(answer, base, best_ev, first.real[0].candidate.label if first.real else None)
+    return answer, causes, legacy, final
 
 
 def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | None = None, scheduler: str | None = None,
@@ -489,28 +460,25 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
     t_start = time.perf_counter()
     inp = _read_inputs(scenario_path, measured_path, out_dir, validate)
     executor = make_executor(workers, scheduler)
-    bar = tqdm(total=1 + sum(len(xs) - 1 for xs, _ in inp.axes.values()), desc="diagnose", unit="run",
-               disable=not progress)
+    bar = tqdm(total=1, desc="diagnose", unit="run", disable=not progress)
     pool = Pool(executor, str(scenario_path), bar=bar)
     try:
         base, baseline = _baseline(pool, inp)
-        dense = _search(inp, _screen(pool, inp, base))
-        confirmed = _confirm(pool, inp, dense)
-        fitted = _fine_fits(pool, inp, _coarse_fits(pool, inp, confirmed))
-        ranking = _rank(base, inp, dense, confirmed, fitted)
-        ext_raw, ext_path = _extend(inp, ranking)
+        ref_raw, ref, nuisance = _nuisance(pool, inp, base)
+        named, rounds, evidence = _rounds(pool, inp, ref_raw, ref)
+        ext_raw = named[-1].raw if named else ref_raw
+        ext_path = _extend(inp, ext_raw)
         validation = _validate(pool, inp, ext_raw)
     finally:
         bar.close()
         executor.shutdown(wait=True, cancel_futures=True)
 
-    after = ranking.best.cmp if ranking.significant else base.cmp
-    causes = [_entry(e, base, ranking.best.bic(), ranking.twins.get(e.candidate, [])) for e in ranking.ranked]
-    result = Diagnosis(str(scenario_path), str(measured_path), baseline, causes, _named(base, ranking),
-                       ext_path.name, _total_gain(base.cmp, after), validation, pool.runs,
+    answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence)
+    result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance, causes, legacy,
+                       ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
                        time.perf_counter() - t_start, _settings(inp.cands))
-    _write_outputs(result, inp, base.cmp, after)
+    _write_outputs(result, inp, base.cmp, final)
     return result
 
 
-__all__ = ["diagnose", "DELTA_BIC", "Diagnosis", "CauseFit"]
+__all__ = ["diagnose", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "MAX_CAUSES", "SECOND_ROUND"]

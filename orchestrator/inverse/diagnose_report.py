@@ -1,6 +1,9 @@
 """The diagnosis report: report.md and its plots (overlays per sensor group, residual bars).
 
-It reads the typed result, :class:`orchestrator.inverse.diagnosis.Diagnosis`.
+It reads the typed result, :class:`orchestrator.inverse.diagnosis.Diagnosis`, and leads
+with the verdict and its evidence in plain words (:func:`_verdict_lines`), then the
+residual before/after per channel, the nuisance estimates, the named causes' intervals,
+the candidates, the validation passages and the variants left out.
 """
 from __future__ import annotations
 
@@ -75,7 +78,8 @@ def write_report(out_dir: Path, result: Diagnosis, target, before, after, layout
     for g in groups:
         save(plot_overlays(target, before, after, layout, g), out_dir / f"overlay_{g}.png")
     save(plot_residual_bars(before, after), out_dir / "residuals.png")
-    lines = _baseline_lines(result, before) + _cause_lines(result)
+    lines = (_verdict_lines(result) + _baseline_lines(result, before, after) + _nuisance_lines(result)
+             + _interval_lines(result) + _cause_lines(result) + _dropped_lines(result))
     if result.validation:
         lines += ["## Validation at other speeds", "", "| file | speed [m/s] | J before | J after | gain |",
                   "|---|---|---|---|---|"]
@@ -89,45 +93,124 @@ def write_report(out_dir: Path, result: Diagnosis, target, before, after, layout
     return path
 
 
-def _baseline_lines(result: Diagnosis, before) -> list[str]:
-    """The report's head and what the simulation gets wrong (``before``: the nominal model's comparison)."""
-    b = result.baseline
+def _label(c) -> str:
+    return c.cause + ("" if c.sleeper is None else f" at sleeper {c.sleeper}")
+
+
+def _verdict_lines(result: Diagnosis) -> list[str]:
+    """The head: the verdict and its evidence in plain words."""
+    a = result.answer
     lines = [f"# Diagnosis of {result.measured}", "",
-             f"Scenario `{result.scenario}`; {result.runs} runs in {result.wall_seconds:.0f} s.", "",
-             "## What the simulation gets wrong", "",
-             f"Objective of the nominal model J = {b.objective:.4g} (noise-only would give about the noise "
-             f"share of each channel). By group (mean nRMSE): " +
+             f"Scenario `{result.scenario}`; {result.runs} runs in {result.wall_seconds:.0f} s.", "", "## Verdict", ""]
+    if a.kind == "named":
+        lines.append(f"**{' + '.join(_label(c) for c in a.causes)}**: {a.reason}")
+        for c in a.causes:
+            s = c.evidence.get("significance", {})
+            amb = (c.ambiguity or {}).get("candidates", [])
+            lines += ["", f"- {_label(c)}: {_fmt(c.parameters)}; J {s.get('objective_reference', float('nan')):.4g}"
+                          f" → {c.objective:.4g} (gain {100 * c.gain:.1f} %, "
+                          f"{100 * s.get('share_of_explainable_misfit', float('nan')):.0f} % of the misfit above the "
+                          f"noise); ΔBIC on {s.get('n_eff', 0):.0f} effective samples {s.get('delta_bic_eff', 0):.3g}"
+                          + (f"; cannot be told apart from {', '.join(amb[1:])}" if len(amb) > 1 else "") + "."]
+    else:
+        lines.append(f"**{a.kind}**: {a.reason}.")
+    if a.where:
+        w = a.where
+        lines += ["", f"Where the remaining residual lives: channels "
+                      f"{', '.join(c['id'] for c in w['channels']) or '-'}; time {w['time_window'][0]:.4f}–"
+                      f"{w['time_window'][1]:.4f} s (wheel at x = {w['wheel_position'][0]:.2f}–"
+                      f"{w['wheel_position'][1]:.2f} m, nearest sleepers {w['sleepers_in_window']}, largest at "
+                      f"sleeper {w['sleeper_nearest_peak']}); channels on sleepers {w['sleepers_of_channels']}"
+                      + (f"; {w['edge']}" if w.get("edge") else "") + f"; frequency band {w['band_hz'][0]:.0f}–"
+                      f"{w['band_hz'][1]:.0f} Hz (peak {w['peak_hz']:.0f} Hz)."]
+    return lines + [""]
+
+
+def _nuisance_lines(result: Diagnosis) -> list[str]:
+    """The nuisance estimates: how the measurement / vehicle differs from the scenario (never a track cause)."""
+    nz = result.nuisance
+    if not nz:
+        return ["## Nuisance parameters", "", "No nuisance stage ran: the causes were fitted on the nominal scenario.",
+                ""]
+    lines = ["## Nuisance parameters", "", "The measurement / vehicle differs from the scenario by:", "",
+             "| parameter | scenario | estimate | 90 % interval | identifiable |", "|---|---|---|---|---|"]
+    values, nominal = nz.get("values", {}), nz.get("nominal", {})
+    intervals, ident = nz.get("intervals", {}), nz.get("identifiable", {})
+    for k, v in values.items():
+        lines.append(f"| {k} | {_fmt(nominal.get(k, ''))} | {_fmt(v)} | {_fmt(intervals.get(k, ''))} | "
+                     f"{ident.get(k, '')} |")
+    if nz.get("channel_gains"):
+        lines += ["", "Sensor gains: " + _fmt(nz["channel_gains"]) + "."]
+    return lines + [""]
+
+
+def _interval_lines(result: Diagnosis) -> list[str]:
+    """The named causes' 90 % intervals, identifiability and the sensors that would pin them."""
+    causes = [c for c in result.answer.causes if c.uncertainty]
+    if not causes:
+        return []
+    lines = ["## Intervals of the named causes (90 %)", "",
+             "| cause | entry | fitted | 90 % interval | identifiable |", "|---|---|---|---|---|"]
+    for c in causes:
+        u = c.uncertainty
+        name, vals = next(iter(c.parameters.items()))
+        vals = vals if isinstance(vals, list) else [vals]
+        for i, (v, iv, ok) in enumerate(zip(vals, u["intervals"], u["identifiable"])):
+            lines.append(f"| {_label(c)} | {name}[{i}] | {v:.4g} | {iv[0]:.4g}–{iv[1]:.4g} | {'yes' if ok else 'no'} |")
+        if u["pin_with"]:
+            lines.append(f"\n{_label(c)}: to pin what the data leave open, add {'; '.join(u['pin_with'])}.\n")
+    return lines + [""]
+
+
+def _dropped_lines(result: Diagnosis) -> list[str]:
+    """The variants left out and why."""
+    if not result.dropped:
+        return []
+    lines = ["## Variants left out", "", "| variant | stage | reason |", "|---|---|---|"]
+    lines += [f"| {d['variant']} | {d['stage']} | {d['reason']} |" for d in result.dropped]
+    return lines + [""]
+
+
+def _baseline_lines(result: Diagnosis, before, after) -> list[str]:
+    """What the simulation gets wrong, and the residual before/after per channel (``before``/``after``: the
+    nominal and the extended model's comparisons)."""
+    b = result.baseline
+    lines = ["## What the simulation gets wrong", "",
+             f"Objective of the nominal model J = {b.objective:.4g} (noise alone would give "
+             f"{_noise_j(result):.4g}). By group (mean nRMSE): " +
              ", ".join(f"{g} {v:.3g}" for g, v in b.where["groups"].items()) + ".", "",
              "Sleepers (mean nRMSE of their sensors): " +
              ", ".join(f"{k}: {v:.3g}" for k, v in b.where["sleepers"].items()) + ".", "",
-             "| channel | nRMSE | RMSE | largest residual at [s] | 80 % of residual energy in [s] |",
-             "|---|---|---|---|---|"]
+             "| channel | nRMSE before | nRMSE after | gain | largest residual at [s] | 80 % of residual energy in [s] |",
+             "|---|---|---|---|---|---|"]
     for k, v in before.channels.items():
-        lines.append(f"| {k} | {v['nrmse']:.4g} | {v['rmse']:.4g} | {v['t_peak']:.4f} | "
-                     f"{v['window'][0]:.4f}–{v['window'][1]:.4f} |")
+        a = after.channels[k]["nrmse"]
+        lines.append(f"| {k} | {v['nrmse']:.4g} | {a:.4g} | {100 * result.gain.channels.get(k, 0.0):.1f} % | "
+                     f"{v['t_peak']:.4f} | {v['window'][0]:.4f}–{v['window'][1]:.4f} |")
     return lines
 
 
+def _noise_j(result: Diagnosis) -> float:
+    for c in result.answer.causes + result.causes:
+        s = c.evidence.get("significance")
+        if s:
+            return s["objective_noise"]
+    return float("nan")
+
+
 def _cause_lines(result: Diagnosis) -> list[str]:
-    """The report's named cause, its table of candidates and the extended scenario's gain."""
-    named = result.named_cause
-    lines = ["", "## Named cause", ""]
-    if named.cause == "none":
-        e = named.evidence
-        lines.append(f"**none**: {e['reason']} (best candidate {e['best_candidate']}, "
-                     f"BIC gain {e['delta_bic_vs_nominal']:.3g} <= {e['threshold']}).")
-    else:
-        where = f" at sleeper {named.sleeper}" if named.sleeper is not None else ""
-        lines.append(f"**{named.cause}{where}**: {_fmt(named.parameters)}; objective {named.objective:.4g}, "
-                     f"gain {100 * named.gain:.1f} %; cannot be told apart from: "
-                     f"{', '.join(named.evidence['indistinguishable_from']) or 'none'}.")
-    lines += ["", "## Candidates (best first)", "",
-              "| cause | sleeper | stage | parameters | J | gain | ΔBIC vs nominal |", "|---|---|---|---|---|---|---|"]
+    """The table of candidates and the extended scenario's gain."""
+    lines = ["", "## Candidates (per round, best first)", "",
+             "| round | cause | sleeper | stage | parameters | J | gain | ΔBIC_eff vs best | rule |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for c in result.causes:
         e = c.evidence
-        sleeper = "" if c.sleeper is None else c.sleeper
-        lines.append(f"| {c.cause} | {sleeper} | {e['stage']} | {_fmt(c.parameters)} | "
-                     f"{c.objective:.4g} | {100 * c.gain:.1f} % | {e['delta_bic_vs_nominal']:.4g} |")
+        sig = e.get("significance")
+        rule = "" if sig is None else ("passes" if sig["passes"] else "; ".join(sig["reasons"]))
+        d = e.get("delta_bic_eff_vs_best")
+        lines.append(f"| {e.get('round', 1)} | {c.cause} | {'' if c.sleeper is None else c.sleeper} | {e['stage']} | "
+                     f"{_fmt(c.parameters)} | {c.objective:.4g} | {100 * c.gain:.1f} % | "
+                     f"{'' if d is None else f'{d:.4g}'} | {rule} |")
     lines += ["", f"Extended scenario: `{result.extended_scenario}`. Total gain "
                   f"{100 * result.gain.total:.1f} %.", ""]
     return lines

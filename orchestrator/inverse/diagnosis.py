@@ -3,10 +3,17 @@
 :class:`Diagnosis` is the whole answer; its :meth:`Diagnosis.to_json` is the content of
 ``diagnosis.json`` (DESIGN.md §4.5), key for key and in the same order, and
 :meth:`Diagnosis.from_json` reads it back, so ``Diagnosis.from_json(d).to_json() == d``.
-The parts: :class:`Baseline` (the nominal model's residuals, also written alone as
-``baseline.json``), :class:`CauseFit` (one candidate cause with its fitted parameters and
-evidence; the named cause is one too), :class:`Gain` and :class:`Passage` (a further
-measured passage compared before/after the extension).
+The parts: :class:`Answer` (the verdict: named cause(s), ``none`` or ``unexplained``
+with where the residual lives), :class:`Baseline` (the nominal model's residuals, also
+written alone as ``baseline.json``), :class:`CauseFit` (one candidate cause with its
+fitted parameters, evidence and, when named, its intervals; ``named_cause`` is kept for
+readers of the first schema: the first named cause, or ``none`` / ``unexplained``),
+:class:`Gain` and :class:`Passage` (a further measured passage compared before/after the
+extension). ``nuisance`` (speed, vehicle, damping, sensor gains fitted before any
+cause) and ``dropped`` (variants left out, and why) are plain dicts / lists.
+
+:meth:`Diagnosis.from_json` also reads a ``diagnosis.json`` of the first schema (no
+``answer``, ``nuisance``, ``dropped``): the answer is then derived from ``named_cause``.
 
 The values are kept as the diagnosis computed them (floats, lists, dicts); writing the
 JSON file (NumPy scalars to numbers) is the caller's business.
@@ -90,6 +97,10 @@ class CauseFit:
     ambiguity : dict or None
         The named cause only: ``{"candidates": [labels], "sleepers": [ints]}``, the
         candidates (and their sleepers) that this data cannot tell apart from it.
+    uncertainty : dict or None
+        A named cause only (:func:`orchestrator.inverse.uncertainty.intervals`):
+        ``{"level", "intervals", "identifiable", "unit_width", "pin_with"}``, per entry
+        of the parameter vector.
     """
 
     cause: str
@@ -99,10 +110,11 @@ class CauseFit:
     evidence: dict
     sleeper: int | None = None
     ambiguity: dict | None = None
+    uncertainty: dict | None = None
 
     def to_json(self) -> dict:
         """JSON-able dict: ``cause``, ``sleeper`` (local causes only), ``parameters``, ``objective``,
-        ``gain``, ``evidence``, ``ambiguity`` (the named cause only)."""
+        ``gain``, ``evidence``, ``ambiguity`` and ``uncertainty`` (a named cause only)."""
         out = {"cause": self.cause}
         if self.sleeper is not None:
             out["sleeper"] = self.sleeper
@@ -110,13 +122,59 @@ class CauseFit:
                     "evidence": self.evidence})
         if self.ambiguity is not None:
             out["ambiguity"] = self.ambiguity
+        if self.uncertainty is not None:
+            out["uncertainty"] = self.uncertainty
         return out
 
     @classmethod
     def from_json(cls, data: dict) -> CauseFit:
-        """The cause of :meth:`to_json`'s dict; a missing ``sleeper`` / ``ambiguity`` is None."""
+        """The cause of :meth:`to_json`'s dict; a missing ``sleeper`` / ``ambiguity`` / ``uncertainty`` is None."""
         return cls(data["cause"], data["parameters"], data["objective"], data["gain"], data["evidence"],
-                   sleeper=data.get("sleeper"), ambiguity=data.get("ambiguity"))
+                   sleeper=data.get("sleeper"), ambiguity=data.get("ambiguity"), uncertainty=data.get("uncertainty"))
+
+
+@dataclass
+class Answer:
+    """The verdict of a diagnosis (DESIGN.md §4.5): named cause(s), ``none`` or ``unexplained``.
+
+    Attributes
+    ----------
+    kind : str
+        ``named`` (one or more causes, each passing the rule of
+        :mod:`orchestrator.inverse.significance`), ``none`` (the residual is at the noise
+        level) or ``unexplained`` (above the noise, and no catalogue cause removes a
+        practically significant share of it).
+    causes : list of CauseFit
+        The named causes in the order they were added (forward selection); each with its
+        own gain over the model before it, its parameters, ``uncertainty`` and evidence.
+    reason : str
+        The verdict in plain words.
+    where : dict or None
+        For ``unexplained`` (and for the rest of the misfit after named causes, when it is
+        above the noise): :func:`orchestrator.inverse.significance.locate`.
+    """
+
+    kind: str
+    causes: list
+    reason: str
+    where: dict | None = None
+
+    def to_json(self) -> dict:
+        """``{"kind", "causes", "reason", "where"}``."""
+        return {"kind": self.kind, "causes": [c.to_json() for c in self.causes], "reason": self.reason,
+                "where": self.where}
+
+    @classmethod
+    def from_json(cls, data: dict) -> Answer:
+        """The answer of :meth:`to_json`'s dict."""
+        return cls(data["kind"], [CauseFit.from_json(c) for c in data["causes"]], data["reason"], data.get("where"))
+
+    @classmethod
+    def of_named_cause(cls, named: dict) -> Answer:
+        """The answer a first-schema ``diagnosis.json`` implies (its ``named_cause`` only)."""
+        if named["cause"] in ("none", "unexplained"):
+            return cls(named["cause"], [], named.get("evidence", {}).get("reason", ""))
+        return cls("named", [CauseFit.from_json(named)], "read from a diagnosis.json of the first schema")
 
 
 @dataclass
@@ -189,55 +247,69 @@ class Diagnosis:
     ----------
     scenario, measured : str
         The nominal scenario and the measured passage, as given.
+    answer : Answer
+        The verdict: named cause(s), ``none`` or ``unexplained`` (with where).
     baseline : Baseline
         What the nominal model gets wrong.
+    nuisance : dict or None
+        The nuisance estimates (speed, time shift, vehicle, damping, sensor gains) fitted
+        before any cause: "the measurement / vehicle differs from the scenario by ...";
+        None when no nuisance stage ran.
     causes : list of CauseFit
-        Every candidate, best first (fitted and confirmed ones by BIC, then the screened ones).
+        Every candidate of the first round, best first (fitted and confirmed ones by BIC on
+        the effective sample size, then the screened ones), then those of later rounds.
     named_cause : CauseFit
-        The named cause (with its ``ambiguity``), or ``none``.
+        The first named cause (with its ``ambiguity``), or ``none`` / ``unexplained``
+        (kept for readers of the first schema).
     extended_scenario : str
         File name of the extended scenario in the output folder (``extended.yaml``).
     gain : Gain
-        Of the extended model on the measured passage.
+        Of the extended model (all named causes) on the measured passage.
     validation : list of Passage
         Further passages (``--validate``).
+    dropped : list of dict
+        Variants left out, each ``{"variant", "stage", "reason"}``.
     runs : int
         Simulations run.
     wall_seconds : float
         Wall time of the diagnosis [s].
     settings : dict
-        The thresholds used (``delta_bic``, ``confirm``, ``fit``, ``sensor_reach``) and the
-        candidates' labels.
+        The thresholds used and the candidates' labels.
     """
 
     scenario: str
     measured: str
+    answer: Answer
     baseline: Baseline
+    nuisance: dict | None
     causes: list[CauseFit]
     named_cause: CauseFit
     extended_scenario: str
     gain: Gain
     validation: list[Passage]
+    dropped: list
     runs: int
     wall_seconds: float
     settings: dict
 
     def to_json(self) -> dict:
         """The content of ``diagnosis.json``: the attributes in their order, each part by its own ``to_json``."""
-        return {"scenario": self.scenario, "measured": self.measured, "baseline": self.baseline.to_json(),
+        return {"scenario": self.scenario, "measured": self.measured, "answer": self.answer.to_json(),
+                "baseline": self.baseline.to_json(), "nuisance": self.nuisance,
                 "causes": [c.to_json() for c in self.causes], "named_cause": self.named_cause.to_json(),
                 "extended_scenario": self.extended_scenario, "gain": self.gain.to_json(),
-                "validation": [v.to_json() for v in self.validation], "runs": self.runs,
+                "validation": [v.to_json() for v in self.validation], "dropped": self.dropped, "runs": self.runs,
                 "wall_seconds": self.wall_seconds, "settings": self.settings}
 
     @classmethod
     def from_json(cls, data: dict) -> Diagnosis:
-        """The diagnosis of :meth:`to_json`'s dict (or of a parsed ``diagnosis.json``)."""
-        return cls(data["scenario"], data["measured"], Baseline.from_json(data["baseline"]),
-                   [CauseFit.from_json(c) for c in data["causes"]], CauseFit.from_json(data["named_cause"]),
-                   data["extended_scenario"], Gain.from_json(data["gain"]),
-                   [Passage.from_json(v) for v in data["validation"]], data["runs"], data["wall_seconds"],
-                   data["settings"])
+        """The diagnosis of :meth:`to_json`'s dict (or of a parsed ``diagnosis.json``, also of the first schema)."""
+        answer = Answer.from_json(data["answer"]) if "answer" in data else Answer.of_named_cause(data["named_cause"])
+        return cls(data["scenario"], data["measured"], answer, Baseline.from_json(data["baseline"]),
+                   data.get("nuisance"), [CauseFit.from_json(c) for c in data["causes"]],
+                   CauseFit.from_json(data["named_cause"]), data["extended_scenario"], Gain.from_json(data["gain"]),
+                   [Passage.from_json(v) for v in data["validation"]], data.get("dropped", []), data["runs"],
+                   data["wall_seconds"], data["settings"])
 
 
-__all__ = ["Diagnosis", "CauseFit", "Baseline", "Gain", "Passage"]
+__all__ = ["Diagnosis", "Answer", "CauseFit", "Baseline", "Gain", "Passage"]

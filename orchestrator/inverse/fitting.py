@@ -1,10 +1,12 @@
 """Bounded least squares on simulation runs, the Jacobian's runs in one parallel batch.
 
 Used where a fit's residuals come from whole simulations (a run takes seconds):
-:func:`orchestrator.inverse.diagnose._fit` (a cause's parameters) and the polish stage of
+:class:`CauseFitter` (a diagnosis cause's parameters) and the polish stage of
 :func:`orchestrator.inverse.calibrate.calibrate`. :func:`scipy.optimize.least_squares` (``trf``,
 bounds ``[0, 1]^n``) drives the iteration; its Jacobian is a forward difference whose
-``n`` perturbed runs are handed over together, so that they run on all workers at once.
+``n`` perturbed runs are handed over together, so that they run on all workers at once
+(:func:`forward_jacobian`, also what the parameter intervals of
+:mod:`orchestrator.inverse.uncertainty` use at the fitted point).
 """
 from __future__ import annotations
 
@@ -91,15 +93,7 @@ def fit_unit_cube(batch: Callable[[list[np.ndarray]], Sequence[np.ndarray]], p0,
         return runs([p])[0]
 
     def jac(p):
-        p = np.asarray(p, float)
-        steps = []
-        for i in range(p.size):
-            dp = np.zeros_like(p)
-            dp[i] = step if p[i] + step <= 1.0 else -step
-            steps.append((p + dp, dp[i]))
-        r0 = fun(p)
-        rs = runs([q for q, _ in steps])
-        return np.column_stack([(r - r0) / d for r, (_, d) in zip(rs, steps)])
+        return forward_jacobian(runs, p, step)
 
     p0 = np.clip(np.asarray(p0, float), START_MARGIN, 1.0 - START_MARGIN)
     r_start = fun(p0)
@@ -110,4 +104,19 @@ def fit_unit_cube(batch: Callable[[list[np.ndarray]], Sequence[np.ndarray]], p0,
                            len(order), calls[0], [cost[b] for b in order])
 
 
-__all__ = ["fit_unit_cube", "LeastSquaresFit", "STEP", "START_MARGIN"]
+def forward_jacobian(runs: Callable[[list[np.ndarray]], Sequence[np.ndarray]], p, step: float = STEP) -> np.ndarray:
+    """Forward-difference Jacobian of ``runs`` at ``p`` in ``[0, 1]^n`` (backwards at the upper face).
+
+    ``runs([p_1, ...]) -> [r(p_1), ...]`` gets the ``n + 1`` points in one call.
+    """
+    p = np.asarray(p, float)
+    steps = []
+    for i in range(p.size):
+        dp = np.zeros_like(p)
+        dp[i] = step if p[i] + step <= 1.0 else -step
+        steps.append((p + dp, dp[i]))
+    r0, *rs = runs([p] + [q for q, _ in steps])
+    return np.column_stack([(r - r0) / d for r, (_, d) in zip(rs, steps)])
+
+
+__all__ = ["fit_unit_cube", "forward_jacobian", "LeastSquaresFit", "STEP", "START_MARGIN"]

@@ -5,12 +5,23 @@ is one candidate at one parameter vector with its comparison and BIC; a candidat
 screened at the magnitudes of :func:`scalar_axis` and its best magnitude found by
 :func:`dense_search`, which interpolates the screening runs' *signals* (monotone cubic
 in the magnitude, log scale for stiffness factors) instead of running more.
+
+Non-finite signals never reach an interpolation or a fit (issue 14: a record that
+reaches beyond the simulated window put NaN into the nominal run's signals on the
+measured time base, and the PCHIP of :func:`dense_search` raised ``y must contain only
+finite values``). :func:`checked_comparison` sorts a finished run into a comparison or a
+*dropped* variant with its reason: the run stopped early (a diverged variant), its
+signals hold a non-finite value, or it does not cover the measured record;
+:attr:`Pool.dropped` lists them (logged as warnings) and the answer reports them.
+Samples outside the simulated window (NaN in *every* variant alike) are masked, not
+dropped: the comparison skips them and the search interpolates the rest.
 """
 from __future__ import annotations
 
+import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -18,6 +29,8 @@ from orchestrator.inputs.causes import Candidate
 from orchestrator.inverse.objective import Comparison, Target
 
 DENSE = 121          # points of the 1-D search between screening runs
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -67,6 +80,8 @@ class Pool:
         Wall time spent waiting for them [s].
     bar : tqdm or None
         Progress bar, advanced by one per run.
+    dropped : list of dict
+        Variants left out, each ``{"variant", "stage", "reason"}`` (:func:`checked_comparison`).
     """
 
     executor: object
@@ -74,6 +89,12 @@ class Pool:
     runs: int = 0
     wall: float = 0.0
     bar: object = None
+    dropped: list = field(default_factory=list)
+
+    def drop(self, variant: str, stage: str, reason: str) -> None:
+        """Record (and log) a variant left out of the diagnosis and why."""
+        log.warning("diagnose: %s (%s) left out: %s", variant, stage, reason)
+        self.dropped.append({"variant": variant, "stage": stage, "reason": reason})
 
     def expect(self, n: int) -> None:
         """Announce ``n`` more runs to the progress bar."""
@@ -110,18 +131,25 @@ def scalar_axis(kind, raw: dict, sleeper) -> tuple[np.ndarray, float]:
 
 
 def dense_search(target: Target, kind, xs: np.ndarray, signals: list[dict]) -> tuple[float, Comparison]:
-    """Best magnitude of a 1-D family of runs by interpolating their signals (module docstring)."""
+    """Best magnitude of a 1-D family of runs by interpolating their signals (module docstring).
+
+    Samples that are not finite in every run (outside the simulated window) are left
+    out of the interpolation and stay NaN, so the comparison skips them.
+    """
     from scipy.interpolate import PchipInterpolator
 
     u = np.log(xs) if kind.log else xs
     ids = list(signals[0])
     Y = np.stack([np.concatenate([sig[k] for k in ids]) for sig in signals])   # (nx, total)
+    masked = ~np.isfinite(Y).all(axis=0)
+    Y[:, masked] = 0.0
     sizes = np.cumsum([0] + [signals[0][k].size for k in ids])
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):   # flat stretches of a signal
         interp = PchipInterpolator(u, Y, axis=0)
     best = None
     for ud in np.linspace(u[0], u[-1], DENSE):
         row = interp(ud)
+        row[masked] = np.nan
         on = {k: row[sizes[i]:sizes[i + 1]] for i, k in enumerate(ids)}
         cmp = target.score(on)
         if best is None or cmp.chi2 < best[1].chi2:
@@ -136,4 +164,26 @@ def comparison(target: Target, run) -> Comparison:
     return target.compare(run.t, run.signals)
 
 
-__all__ = ["Pool", "Evaluated", "DENSE", "scalar_axis", "dense_search", "comparison"]
+def checked_comparison(target: Target, run, reference: Comparison | None = None) -> tuple[Comparison | None, str]:
+    """The comparison of a run, or None and why it cannot be compared (module docstring).
+
+    ``reference`` (the comparison of the model this variant changes): a variant whose
+    signals are NaN on the measured base where the reference's are finite diverged.
+    """
+    if run.error:
+        return None, f"the run stopped early: {run.error}"
+    bad = [k for k, y in run.signals.items() if not np.isfinite(y).all()]
+    if bad:
+        return None, f"non-finite simulated signal(s) {', '.join(bad[:4])}"
+    try:
+        cmp = target.compare(run.t, run.signals)
+    except ValueError as exc:   # score(): fewer than 2 samples of a channel inside the simulated window
+        return None, f"the comparison window lies outside the simulated record ({exc})"
+    if reference is not None:
+        lost = [k for k, y in cmp.simulated.items() if (~np.isfinite(y) & np.isfinite(reference.simulated[k])).any()]
+        if lost:
+            return None, f"covers less of the record than the reference model (channels {', '.join(lost[:4])})"
+    return cmp, ""
+
+
+__all__ = ["Pool", "Evaluated", "DENSE", "scalar_axis", "dense_search", "comparison", "checked_comparison"]

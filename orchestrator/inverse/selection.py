@@ -1,0 +1,257 @@
+"""One round of cause selection of a diagnosis: screen, search, confirm, fit, rank (steps 2-5).
+
+A round works on a *reference* model — the nominal scenario (with its nuisance
+estimates) for the first cause, the model extended by the causes named so far for the
+next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of candidates:
+
+1. :func:`_screen`: every candidate at the magnitudes of its screening grid (one batch);
+2. :func:`_search`: each candidate's best magnitude by the dense 1-D search between its
+   screening runs (:func:`orchestrator.inverse.screening.dense_search`, no runs);
+3. :func:`_confirm`: the :data:`CONFIRM` best re-run at their best magnitude;
+4. :func:`_coarse_fits`, :func:`_fine_fits`: bounded least squares (:class:`CauseFitter`;
+   a void first as a wedge, :func:`cause_stages`), all parameters of the best and of
+   up to :data:`FIT` - 1 runners-up within a chi-square factor :data:`FIT_RATIO`;
+5. :func:`_rank`: the fitted and confirmed candidates by their BIC on the effective
+   sample size (:func:`orchestrator.inverse.significance.bic_eff`, N_eff of the best
+   one's residual for all of them, so they compare like with like), and who cannot be
+   told apart from whom (within :data:`~orchestrator.inverse.significance.DELTA_BIC`).
+
+Variants whose run cannot be compared (stopped early, non-finite signals, outside the
+record) are left out with their reason (:attr:`orchestrator.inverse.screening.Pool.dropped`);
+inside a fit such a point gets a residual :data:`PENALTY` times the reference's, so the
+trust region steps away from it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from orchestrator.inputs.causes import kind_of
+from orchestrator.inverse.objective import Comparison, Target
+from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison, dense_search, scalar_axis
+from orchestrator.inverse.significance import DELTA_BIC, bic_eff, channel_neff
+
+CONFIRM = 4          # candidates re-run at their screened optimum
+FIT = 2              # candidates whose full parameter set is fitted, at most ...
+FIT_RATIO = 2.0      # ... of those whose confirmed chi-square is within this factor of the best's
+FIT_MAX_NFEV = 5     # least-squares iterations of a coarse fit (each: one run + a parallel Jacobian) ...
+FINE_MAX_NFEV = 8    # ... and of the fine stages (six gaps)
+PENALTY = 10.0       # residual of a point whose run failed, times the reference's (inside a fit)
+
+
+def cause_stages(kind) -> list:
+    """Coarse-to-fine parameterisations of a fit: (number of parameters, map to the unit cube).
+
+    A void is first fitted as a wedge (the gaps linear between the sleeper's ends: 2
+    parameters, well conditioned, covering a uniform gap) and then point by point from
+    there; six free gaps straight from a uniform start stall in the non-smooth contact
+    response. The other causes have one parameter.
+    """
+    n = len(kind.names)
+    if n == 1:
+        return [(1, lambda p: np.asarray(p, float))]
+    return [(2, lambda p: np.linspace(p[0], p[1], n)), (n, lambda p: np.asarray(p, float))]
+
+
+@dataclass
+class CauseFitter:
+    """Runs of one candidate on a reference scenario, cached by the unit-cube point.
+
+    Attributes
+    ----------
+    pool : Pool
+    target : Target
+    raw : dict
+        The reference scenario the candidate is applied to.
+    start : Evaluated
+        The candidate's evaluation the fit starts from.
+    reference : Comparison
+        The reference model's comparison (what a failed point's residual is scaled from).
+    cache : dict
+        Unit-cube point (bytes) -> Comparison, or None for a failed run.
+    """
+
+    pool: Pool
+    target: Target
+    raw: dict
+    start: Evaluated
+    reference: Comparison
+    cache: dict = field(default_factory=dict)
+
+    def runs(self, us: list[np.ndarray]) -> list[Comparison | None]:
+        """The comparisons of the points ``us`` (full parameter vectors in the unit cube)."""
+        c, kind = self.start.candidate, kind_of(self.start.candidate)
+        todo = list({u.tobytes(): u for u in us if u.tobytes() not in self.cache}.values())
+        if todo:
+            out = self.pool.map([kind.apply(self.raw, c.sleeper, kind.from_unit(u)) for u in todo])
+            for u, run in zip(todo, out):
+                cmp, why = checked_comparison(self.target, run, self.reference)
+                if cmp is None:
+                    self.pool.drop(f"{c.label} at {np.round(kind.from_unit(u), 6).tolist()}", "fit", why)
+                self.cache[u.tobytes()] = cmp
+        return [self.cache[u.tobytes()] for u in us]
+
+    def residuals(self, us: list[np.ndarray]) -> list[np.ndarray]:
+        """Weighted residuals of the points (a failed point: :data:`PENALTY` x the reference's)."""
+        return [self.target.weighted_residuals(cm) if cm is not None
+                else PENALTY * self.target.weighted_residuals(self.reference) for cm in self.runs(us)]
+
+    def best(self) -> np.ndarray:
+        """The cached point of least chi-square."""
+        ok = {b: cm for b, cm in self.cache.items() if cm is not None}
+        return np.frombuffer(min(ok, key=lambda b: ok[b].chi2), dtype=float).copy()
+
+    def fit(self, start: Evaluated, stages: slice, max_nfev: int) -> Evaluated:
+        """Bounded least squares through ``cause_stages(kind)[stages]`` from ``start``."""
+        from orchestrator.inverse.fitting import fit_unit_cube
+
+        kind = kind_of(start.candidate)
+        u_best, k = np.clip(kind.to_unit(start.values), 0.0, 1.0), start.k
+        for n, to_u in cause_stages(kind)[stages]:
+            k = n
+
+            def batch(ps, to_u=to_u):
+                return self.residuals([np.clip(to_u(p), 0.0, 1.0) for p in ps])
+
+            p0 = u_best[[0, -1]] if n == 2 else u_best   # the wedge starts from the current ends
+            fit_unit_cube(batch, p0, max_nfev=max_nfev)
+            if any(cm is not None for cm in self.cache.values()):
+                u_best = self.best()
+        best = self.cache.get(u_best.tobytes())
+        if best is None or best.chi2 > start.cmp.chi2:   # the fit never did better than its start
+            return Evaluated(start.candidate, start.values, start.cmp, k, "fitted")
+        return Evaluated(start.candidate, kind.from_unit(u_best), best, k, "fitted")
+
+    def jacobian(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(Jacobian of the weighted residuals in the unit cube, the residuals) at ``values``."""
+        from orchestrator.inverse.fitting import forward_jacobian
+
+        u = np.clip(kind_of(self.start.candidate).to_unit(values), 0.0, 1.0)
+        jac = forward_jacobian(self.residuals, u)
+        return jac, self.residuals([u])[0]
+
+
+# ------------------------------------------------------------------------------------ a round
+@dataclass
+class Round:
+    """What one round of selection found (module doc).
+
+    Attributes
+    ----------
+    reference : Evaluated
+        The model the candidates were added to.
+    k_ref : int
+        Parameters already fitted in it.
+    ranked : list of Evaluated
+        Every candidate's last evaluation: the fitted and confirmed ones by BIC on N_eff,
+        then the screened ones by chi-square.
+    real : list of Evaluated
+        The fitted and confirmed candidates of ``ranked``.
+    bic : dict
+        Candidate of ``real`` -> its BIC on N_eff (k counts the reference's parameters too).
+    twins : dict
+        Candidate of ``real`` -> labels of the others within DELTA_BIC of it.
+    fitters : dict
+        Candidate -> its :class:`CauseFitter` (its runs, for the intervals).
+    """
+
+    reference: Evaluated
+    k_ref: int
+    ranked: list
+    real: list
+    bic: dict
+    twins: dict
+    fitters: dict
+
+
+def _screen(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, axes: dict) -> dict:
+    """Step 2, runs: candidate -> magnitude -> signals on the measured base (failed variants left out)."""
+    jobs = [(c, x) for c in cands for x in axes[c][0] if abs(x - axes[c][1]) > 1e-12]
+    runs = pool.map([kind_of(c).apply_scalar(raw, c.sleeper, x) for c, x in jobs])
+    screened = {c: {axes[c][1]: ref.cmp.simulated} for c in cands}
+    for (c, x), run in zip(jobs, runs):
+        cmp, why = checked_comparison(target, run, ref.cmp)
+        if cmp is None:
+            pool.drop(f"{c.label} at {x:.6g}", "screening", why)
+        else:
+            screened[c][x] = cmp.simulated
+    return screened
+
+
+def _search(target: Target, cands: list, screened: dict) -> dict:
+    """Step 2, no runs: candidate -> its ``screened`` evaluation (candidates with < 2 magnitudes left out)."""
+    dense = {}
+    for c in cands:
+        xs = np.array(sorted(screened[c]))
+        if xs.size < 2:
+            continue
+        x_best, cmp = dense_search(target, kind_of(c), xs, [screened[c][x] for x in xs])
+        dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best), cmp, 1, "screened")
+    return dense
+
+
+def _confirm(pool: Pool, target: Target, raw: dict, ref: Evaluated, dense: dict) -> dict:
+    """Step 3: the :data:`CONFIRM` best screened candidates re-run at their best magnitude."""
+    top = sorted(dense, key=lambda c: dense[c].cmp.chi2)[:CONFIRM]
+    pool.expect(len(top))
+    runs = pool.map([kind_of(c).apply(raw, c.sleeper, dense[c].values) for c in top])
+    out = {}
+    for c, run in zip(top, runs):
+        cmp, why = checked_comparison(target, run, ref.cmp)
+        if cmp is None:
+            pool.drop(f"{c.label} at {np.round(dense[c].values, 6).tolist()}", "confirmation", why)
+        else:
+            out[c] = Evaluated(c, dense[c].values, cmp, 1, "confirmed")
+    return out
+
+
+def _fits(pool: Pool, target: Target, raw: dict, ref: Evaluated, confirmed: dict) -> tuple[dict, dict]:
+    """Step 4: every confirmed candidate fitted coarsely, then all parameters of the best (and close runners-up).
+
+    Returns (candidate -> ``fitted`` evaluation, candidate -> its :class:`CauseFitter`).
+    """
+    fitters = {c: CauseFitter(pool, target, raw, e, ref.cmp) for c, e in confirmed.items()}
+    for c in confirmed:
+        pool.expect(FIT_MAX_NFEV * (cause_stages(kind_of(c))[0][0] + 1))
+    fitted = {c: fitters[c].fit(confirmed[c], slice(0, 1), FIT_MAX_NFEV) for c in confirmed}
+    if not fitted:
+        return fitted, fitters
+    by_fit = sorted(fitted, key=lambda c: fitted[c].cmp.chi2)
+    lead = fitted[by_fit[0]].cmp.chi2
+    for c in [c for c in by_fit if fitted[c].cmp.chi2 <= FIT_RATIO * lead][:FIT]:
+        stages = cause_stages(kind_of(c))
+        if len(stages) > 1:
+            pool.expect(FINE_MAX_NFEV * sum(n + 1 for n, _ in stages[1:]))
+            fitted[c] = fitters[c].fit(fitted[c], slice(1, None), FINE_MAX_NFEV)
+    return fitted, fitters
+
+
+def _rank(target: Target, ref: Evaluated, k_ref: int, dense: dict, confirmed: dict, fitted: dict,
+          fitters: dict) -> Round:
+    """Step 5: the fitted and confirmed candidates by BIC on N_eff, then the screened ones; who are twins."""
+    final = {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}
+    real = [e for e in final.values() if e.stage in ("fitted", "confirmed")]
+    rest = sorted((e for e in final.values() if e.stage == "screened"), key=lambda e: e.cmp.chi2)
+    if not real:
+        return Round(ref, k_ref, rest, [], {}, {}, fitters)
+    neff = channel_neff(min(real, key=lambda e: e.cmp.chi2).cmp)
+    bic = {e.candidate: bic_eff(e.cmp, target.sigma, neff, k_ref + e.k) for e in real}
+    real.sort(key=lambda e: bic[e.candidate])
+    twins = {e.candidate: [o.candidate.label for o in real if o is not e and abs(bic[o.candidate] - bic[e.candidate])
+                           < DELTA_BIC] for e in real}
+    return Round(ref, k_ref, real + rest, real, bic, twins, fitters)
+
+
+def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, cands: list) -> Round:
+    """One round (module doc): ``cands`` added one at a time to the reference ``raw`` / ``ref``."""
+    axes = {c: scalar_axis(kind_of(c), raw, c.sleeper) for c in cands}
+    pool.expect(sum(len(axes[c][0]) - 1 for c in cands))
+    dense = _search(target, cands, _screen(pool, target, raw, ref, cands, axes))
+    confirmed = _confirm(pool, target, raw, ref, dense)
+    fitted, fitters = _fits(pool, target, raw, ref, confirmed)
+    return _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)
+
+
+__all__ = ["select", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO", "FIT_MAX_NFEV",
+           "FINE_MAX_NFEV", "PENALTY"]
