@@ -195,22 +195,26 @@ def test_crossing_sections_follow_the_layout(layout):
 
 
 def test_nose_section_by_hand(layout):
-    """Nose at 30 mm width: top at -tip_drop (1 - 30/50) = -1.2 mm on its flat part, corner arcs of
-    R13 at both edges (vertical at the edge: 13 mm below the top), absent outside; with a nose wear
-    of 2 mm at the station the top is 2 mm lower."""
-    cs = CrossingSections.from_layout(layout)
+    """Nose at 30 mm width: the 60E1 head with its gauge corner at eta = 0 cut by the mirrored head
+    at eta = 30 mm: a ridge at eta = 15 mm whose height is the head's at u = 15 - 36 = -21 mm (on the
+    R80 shoulder arc: centre and radius from the head's own construction, computed here by hand),
+    the same at mirrored points, absent outside [0, w] (no design drop); a drop d (1 - w/full_width) and a nose
+    wear of 2 mm lower it by those amounts. Tolerances: round-off (1e-12 m), the far edge 1e-7 m
+    (the width is 30 mm to the root finding's 1e-13 m; at the vertical side that moves the height by
+    20 * 1e-13; kept loose)."""
+    cs = CrossingSections.from_layout(layout, tip_drop=0.0)
     x = brentq(lambda x: float(cs.separation(x)) - 0.030, layout.x_tcp, layout.x_tcp + 1.0, xtol=1e-13)
-    eta = np.array([-1e-4, 0.0, 0.013, 0.015, 0.017, 0.030, 0.0301])
+    eta = np.array([-1e-4, 0.0, 0.010, 0.015, 0.020, 0.030, 0.0301])
     z, k = cs.nose(x, eta)
-    np.testing.assert_allclose(z[[2, 3, 4]], -1.2e-3, atol=1e-12)
-    assert z[1] == pytest.approx(-1.2e-3 - 0.013, abs=1e-12)
-    # the far edge: the width is 30 mm to the root finding's 1e-13 m, and at a vertical tangent the
-    # height moves by sqrt(2 R dw) ~ 5e-8 m for that
-    assert z[5] == pytest.approx(z[1], abs=1e-7)
+    c2 = RAIL_HEADS["60E1"]._arcs["c"][1]                  # R80 centre (u, z) of the right half
+    ridge = c2[1] + math.sqrt(0.080 ** 2 - (0.021 - c2[0]) ** 2)
+    assert z[3] == pytest.approx(ridge, abs=1e-12) and k[3] == pytest.approx(1 / 0.080)
+    assert z[2] == pytest.approx(z[4], abs=1e-12) and z[1] == pytest.approx(z[5], abs=1e-7)
+    assert z[2] < z[3] and z[1] < z[2]
     assert np.isinf(z[0]) and np.isinf(z[6])
-    assert k[1] == pytest.approx(1 / 0.013)
-    worn = CrossingSections.from_layout(layout, nose_wear_stations=(0.0, 1.0), nose_wear=(0.002, 0.002))
-    assert float(worn.nose(x, 0.015)[0]) == pytest.approx(-3.2e-3, abs=1e-12)
+    worn = CrossingSections.from_layout(layout, nose_wear_stations=(0.0, 1.0), nose_wear=(0.002, 0.002),
+                                        tip_drop=0.003, full_width=0.05)
+    assert float(worn.nose(x, 0.015)[0]) == pytest.approx(ridge - 0.002 - 0.003 * (1 - 0.030 / 0.05), abs=1e-12)
 
 
 def test_wear_shape_functions_are_smooth(layout):

@@ -330,7 +330,8 @@ class RailHead:
         h = 1e-7
         for _ in range(4):
             z, _ = self._upright(v)
-            zp = (self._upright(v + h)[0] - self._upright(v - h)[0]) / (2 * h)
+            with np.errstate(invalid="ignore"):                # -inf - -inf off the head
+                zp = (self._upright(v + h)[0] - self._upright(v - h)[0]) / (2 * h)
             fz = np.where(np.isfinite(z), z, 0.0)
             fzp = np.where(np.isfinite(zp), zp, 0.0)
             v = v - (v * c - fz * s - u) / (c - fzp * s)
@@ -368,8 +369,8 @@ class CrossingSections:
     flangeway)`` with ``sep(x)`` the signed separation ``L_d - L_t`` of the layout
     (:meth:`track.layout.TurnoutGeometry.separation`: a flare at the crossing angle behind the
     throat); its head is the rail head (:class:`RailHead`) beside it, up to ``x_tcp + wing_end``.
-    The nose spans ``eta`` in ``[0, sep(x)]`` where ``sep >= tip_width``: a flat top with corner
-    arcs of ``min(corner_radius, sep/2)``, lowered by the design drop ``tip_drop * (1 - sep /
+    The nose spans ``eta`` in ``[0, sep(x)]`` where ``sep >= tip_width``: two rail heads cut to
+    the nose (:meth:`nose`), optionally lowered by a design drop ``tip_drop * (1 - sep /
     full_width)`` near its tip. Wear: ``nose_wear(x)``, ``wing_wear(x)`` [m] (height loss) are
     PCHIP (C1) functions through stations ``x - x_tcp`` [m].
 
@@ -380,11 +381,15 @@ class CrossingSections:
     separation : callable
         ``sep(x)`` [m], array in, array out.
     head : RailHead
-    flangeway, wing_end, tip_width, corner_radius, tip_drop, full_width : float
+    flangeway, wing_end, tip_width, tip_drop, full_width : float
         [m]; defaults: track.layout.FLANGEWAY, CROSSING_WING_END, the solid crossing's nose tip
-        (12 mm), the 60E1 corner radius, and a design drop of 3 mm at the tip vanishing at 50 mm
-        nose width (this module's choice: crossings' drawings differ; tests/test_contact_geometry
-        reports where the new S1002 wheel then transfers).
+        (12 mm, track.solid.crossing.NOSE_TIP_WIDTH), and a design lowering of the nose top of
+        4 mm at the theoretical point vanishing at 40 mm nose width: this module's design value,
+        not from a drawing, chosen so that the centred new S1002 wheel transfers from the wing
+        rail to the nose at the layout's nominal 20 mm nose width
+        (track.layout.NOSE_WIDTH_AT_TRANSFER; tests/test_contact_geometry.py checks it). Without
+        it (``tip_drop = 0``) the heads' ridge stands 1-2 mm above the falling wheel at 12-20 mm
+        and the wheel would strike the nose tip.
     nose_wear_stations, nose_wear, wing_wear_stations, wing_wear : tuple of float
         Wear (height loss, m) at stations ``x - x_tcp`` [m].
     """
@@ -395,9 +400,8 @@ class CrossingSections:
     flangeway: float = 0.041
     wing_end: float = 1.8
     tip_width: float = 0.012
-    corner_radius: float = 0.013
-    tip_drop: float = 0.003
-    full_width: float = 0.050
+    tip_drop: float = 0.004
+    full_width: float = 0.040
     nose_wear_stations: tuple = ()
     nose_wear: tuple = ()
     wing_wear_stations: tuple = ()
@@ -441,18 +445,26 @@ class CrossingSections:
 
     def nose(self, x, eta) -> tuple[np.ndarray, np.ndarray]:
         """Height [m] and lateral curvature [1/m] of the nose at ``(x, eta)`` (broadcast); ``-inf``
-        off the nose."""
+        off the nose.
+
+        The nose of width ``w`` is the rail head with its gauge corner on ``L_t`` (``eta = 0``) cut
+        by the mirrored head with its gauge corner on ``L_d`` (``eta = w``): the lower of the two
+        where both exist. A narrow nose is thus a ridge of the heads' corner and shoulder arcs,
+        lower than the crown (4.6 mm at the 12 mm tip, 60E1), and from ``w = 2 x head width`` on
+        the two heads are the V legs. Then the design drop and the wear are subtracted.
+        """
         x, eta = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(eta, dtype=float))
         w = self.nose_width(x)
-        rc = np.minimum(self.corner_radius, 0.5 * w)
-        d = np.minimum(eta, w - eta)                          # distance from the nearer edge
-        on = (w > 0.0) & (d >= 0.0)
-        rcs = np.where(rc > 0.0, rc, 1.0)
-        corner = d < rc
-        dz = np.where(corner, rcs - np.sqrt(np.clip(rcs * rcs - (rcs - d) ** 2, 0.0, None)), 0.0)
+        hw = 0.5 * self.head.width
+        z1, k1 = self.head.height_and_curvature(eta - hw)
+        z2, k2 = self.head.height_and_curvature(w - eta - hw)
+        both = np.isfinite(z1) & np.isfinite(z2)
+        use2 = np.where(both, z2 < z1, np.isfinite(z2))
+        z = np.where(use2, z2, z1)
+        k = np.where(use2, k2, k1)
+        on = (w > 0.0) & (eta >= 0.0) & (eta <= w) & np.isfinite(z)
         drop = self.tip_drop * np.clip(1.0 - w / self.full_width, 0.0, 1.0)
-        z = -drop - dz - self._wear("nose", x)
-        k = np.where(corner, 1.0 / rcs, 0.0)
+        z = z - drop - self._wear("nose", x)
         return np.where(on, z, -np.inf), np.where(on, k, 0.0)
 
 
