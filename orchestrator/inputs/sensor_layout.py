@@ -24,17 +24,18 @@ from __future__ import annotations
 
 import logging
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from orchestrator.inputs.errors import UserInputError
+from orchestrator.inputs.errors import UserInputError, UserInputWarning
 from orchestrator.inputs.errors import did_you_mean as _hint
 from orchestrator.inputs.track_model import track_model
 from orchestrator.inputs.yaml_io import read_yaml
-from track.model import TrackModel
-from track.sensors import GAUGE_LENGTH, RECONSTRUCTION_HIGHPASS, SENSOR_TYPES, Sensor
+from track.model import TrackModel, rail_parts
+from track.sensors import GAUGE_LENGTH, RECONSTRUCTION_HIGHPASS, SENSOR_TYPES, Sensor, compile_sensors
 
 log = logging.getLogger(__name__)
 
@@ -187,7 +188,8 @@ def _lateral(value, model: TrackModel, sleeper: int, where: str) -> float:
         return float(value)
     if isinstance(value, str) and (m := _SEAT.match(value)):
         rail = m.group(1)
-        ys = [y for s, r, y in zip(model.pads.sleeper, model.pads.rail, model.pads.y) if s == sleeper and r == rail]
+        parts = set(rail_parts(model, rail)) or {rail}     # the solid model splits the crossing block
+        ys = [y for s, r, y in zip(model.pads.sleeper, model.pads.rail, model.pads.y) if s == sleeper and r in parts]
         if not ys:
             rails = sorted({r for s, r in zip(model.pads.sleeper, model.pads.rail) if s == sleeper})
             raise UserInputError(f"{where}: rail {rail!r} has no seat on sleeper {sleeper}"
@@ -206,28 +208,73 @@ def _longitudinal(value, model: TrackModel, where: str) -> float:
     raise UserInputError(f"{where}: x must be a number [m] or T+offset, got {value!r}")
 
 
-def resolve(layout: SensorLayout, model: TrackModel) -> list[Sensor]:
-    """The layout's sensors placed on ``model`` (body names and coordinates)."""
-    out = []
-    names = [b.name for b in model.bodies]
-    for i, e in enumerate(layout.entries):
-        where = f"{layout.source}: sensors[{i}] ({e['id']})"
-        if "sleeper" in e:
-            k = _sleeper_index(e["sleeper"], model, where)
-            body, coord = f"sleeper_{k}", _lateral(e["y"], model, k, where)
-            b = model.body(body)
-            lo, hi = b.coords()[[0, -1]]
-        else:
-            body = e["rail"]
-            if body not in names:
-                raise UserInputError(f"{where}: no rail {body!r} in this track{_hint(body, names)}")
-            coord = _longitudinal(e["x"], model, where)
-            lo, hi = model.body(body).coords()[[0, -1]]
+def _on_rail(e: dict, model: TrackModel, where: str) -> tuple[str, float]:
+    """Body and track coordinate of a sensor given by ``rail`` + ``x``.
+
+    A rail the model splits into parts (the crossing block with ``track.model: solid``:
+    ``crossing_front``, the solid ``crossing``, ``crossing_rear``) gives the part under
+    the sensor; a strain gauge must lie on one part (its rows come from one body).
+    """
+    rail = e["rail"]
+    parts = rail_parts(model, rail)
+    if not parts:
+        names = [b.name for b in model.bodies if b.sleeper < 0]
+        raise UserInputError(f"{where}: no rail {rail!r} in this track{_hint(rail, names)}")
+    coord = _longitudinal(e["x"], model, where)
+    half = 0.5 * float(e.get("gauge_length", GAUGE_LENGTH)) if e["type"] == "strain" else 0.0
+    spans = [(name, *_span(model, name)) for name in parts]
+    lo, hi = spans[0][1], spans[-1][2]
+    if not lo - 1e-9 <= coord <= hi + 1e-9:
+        raise UserInputError(f"{where}: position {coord:.3f} m is off {rail} ({lo:.3f}..{hi:.3f} m)")
+    for name, a, b in spans:
+        if a - 1e-9 <= coord - half and coord + half <= b + 1e-9:
+            return name, coord
+    name, a, b = next(sp_ for sp_ in spans if sp_[1] - 1e-9 <= coord <= sp_[2] + 1e-9)
+    raise UserInputError(f"{where}: the gauge {coord - half:.3f}..{coord + half:.3f} m crosses an end of "
+                         f"{name} ({a:.3f}..{b:.3f} m; the track model joins {', '.join(parts)} there): "
+                         "move it or shorten gauge_length")
+
+
+def _span(model: TrackModel, body: str) -> tuple[float, float]:
+    """Track coordinates [m] of the ends of a rail body (the solid: of its contact path)."""
+    b = model.body(body)
+    lo, hi = (b.origin + b.fom.contact_s[[0, -1]]) if b.solid else b.coords()[[0, -1]]
+    return float(lo), float(hi)
+
+
+def _resolve_one(e: dict, model: TrackModel, where: str) -> Sensor:
+    """One layout entry placed on ``model``."""
+    if "sleeper" in e:
+        k = _sleeper_index(e["sleeper"], model, where)
+        body, coord = f"sleeper_{k}", _lateral(e["y"], model, k, where)
+        lo, hi = model.body(body).coords()[[0, -1]]
         if not lo - 1e-9 <= coord <= hi + 1e-9:
             raise UserInputError(f"{where}: position {coord:.3f} m is off {body} ({lo:.3f}..{hi:.3f} m)")
-        out.append(Sensor(id=e["id"], type=e["type"], group=e["group"], body=body, coord=coord,
-                          z=float(e.get("z", 0.0)), gauge_length=float(e.get("gauge_length", GAUGE_LENGTH))))
-    return out
+    else:
+        body, coord = _on_rail(e, model, where)
+    sensor = Sensor(id=e["id"], type=e["type"], group=e["group"], body=body, coord=coord,
+                    z=float(e.get("z", 0.0)), gauge_length=float(e.get("gauge_length", GAUGE_LENGTH)))
+    try:
+        compile_sensors(model, [sensor])       # a height outside the solid rail's section, ...
+    except ValueError as exc:
+        raise UserInputError(f"{where}: {exc}") from None
+    return sensor
+
+
+def resolve(layout: SensorLayout, model: TrackModel) -> list[Sensor]:
+    """The layout's sensors placed on ``model`` (body names and coordinates).
+
+    Works on both track models: with ``track.model: solid`` the crossing rail's sensors
+    land on the part of the block under them (the solid ``crossing`` or a beam part) and
+    ``seat:crossing`` is the block's seat on that sleeper, whichever part it belongs to.
+
+    Raises
+    ------
+    UserInputError
+        A sensor that does not fit this track (one line naming it and why).
+    """
+    return [_resolve_one(e, model, f"{layout.source}: sensors[{i}] ({e['id']})")
+            for i, e in enumerate(layout.entries)]
 
 
 def layout_of(scenario) -> SensorLayout:
@@ -241,8 +288,10 @@ def scenario_sensors(scenario, model=None) -> list:
     Returns
     -------
     list of track.sensors.Sensor
-        Empty when the scenario gives no layout and the default one does not fit its
-        track (e.g. plain track: logged as a warning).
+        The scenario's layout: all its sensors. The default layout (the scenario names
+        none): those of its sensors that fit the track; the others (a plain track has no
+        crossing rail) are named in a :class:`UserInputWarning` (the command line prints it),
+        never dropped silently.
 
     Raises
     ------
@@ -250,14 +299,21 @@ def scenario_sensors(scenario, model=None) -> list:
         The scenario's layout file is invalid or one of its sensors does not fit this track.
     """
     layout = layout_of(scenario)
-    try:
-        return resolve(layout, track_model(scenario.track) if model is None else model)
-    except UserInputError as exc:
-        if scenario.sensors is not None:
-            raise
-        log.warning("the default sensor layout does not fit this track (%s): no sensor signals; "
-                    "give the scenario a layout (sensors:) for them", exc)
-        return []
+    model = track_model(scenario.track) if model is None else model
+    if scenario.sensors is not None:
+        return resolve(layout, model)
+    kept, dropped = [], []
+    for i, e in enumerate(layout.entries):
+        try:
+            kept.append(_resolve_one(e, model, f"{layout.source}: sensors[{i}] ({e['id']})"))
+        except UserInputError as exc:
+            dropped.append((e["id"], str(exc)))
+    if dropped:
+        warnings.warn(f"the default sensor layout does not fit this track: no signals for "
+                      f"{', '.join(d[0] for d in dropped)} (first: {dropped[0][1]}); give the scenario a layout "
+                      "(sensors:) that fits", UserInputWarning, stacklevel=2)
+        log.info("default sensor layout: %d of %d sensors fit this track", len(kept), len(layout.entries))
+    return kept
 
 
 __all__ = ["layout_of", "scenario_sensors", "SensorLayout", "load_layout", "layout_from_dict", "resolve", "default_layout_path"]

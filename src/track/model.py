@@ -369,6 +369,20 @@ def reference_point(model: TrackModel) -> tuple[str, float, int]:
     return "left", lay.sleepers[k].x, k
 
 
+def rail_parts(model: TrackModel, name: str) -> list[str]:
+    """The bodies that model the layout rail ``name``, in increasing ``x``.
+
+    ``[name]`` for a rail modelled as one body; with ``model: solid`` the crossing block
+    (``crossing``) is three: ``crossing_front``, ``crossing`` (the solid), ``crossing_rear``
+    (:func:`_split_crossing`). Empty if the model has no such rail.
+    """
+    names = [name, f"{name}_front", f"{name}_rear"]
+    parts = [b for b in model.bodies if b.name in names and b.sleeper < 0]
+    if not any(b.name == name for b in parts):
+        return []
+    return [b.name for b in sorted(parts, key=lambda b: b.origin)]
+
+
 @dataclass
 class _BodySpec:
     """A body before reduction: its FE model and the dofs it keeps.

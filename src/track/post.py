@@ -94,7 +94,8 @@ def strain(model: TrackModel, body: str, coord: float, z: float, q: np.ndarray,
       full field, give ``eps = -z (theta(c + L/2) - theta(c - L/2)) / L``, which is
       ``-z M / (E I)`` for a constant moment M (sagging +);
     * the solid crossing rail: the axial displacements of the two surface points at
-      that height (on the +y side of the section, centroid height as neutral axis),
+      that height (on the +y side of the section, the centroid height at the gauge centre
+      as neutral axis, both ends at one height),
       ``eps = (u_x(c + L/2) - u_x(c - L/2)) / L``.
 
     Parameters
@@ -135,8 +136,7 @@ def strain_row(model: TrackModel, body: str, coord: float, z: float, gauge_lengt
         raise ValueError(f"gauge {lo:.3f}..{hi:.3f} m is not on {body} ({s0:.3f}..{s1:.3f} m)")
     row = np.zeros(model.n)
     if b.solid:
-        R = b.fom.axial_rows(np.array([lo, hi]) - b.origin, z)          # (2, nr)
-        row[b.gdofs] = (R[1] - R[0]) / L
+        row[b.gdofs] = b.fom.gauge_row(b.local(coord), z, L)          # both ends at one height
         return row
     th = []
     for s in (lo, hi):

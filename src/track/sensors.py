@@ -8,7 +8,10 @@ type              reading                                                       
 ================  ============================================================  ========
 ``pressure``      sleeper-ballast contact pressure at ``coord`` on a sleeper,   Pa
                   linear between the two nearest ballast bushings
-``acceleration``  vertical acceleration at ``coord`` on a body                  m/s^2
+``acceleration``  vertical acceleration at ``coord`` on a body (on the solid    m/s^2
+                  crossing rail: at the surface point ``z`` above the rail's
+                  neutral axis, :data:`SOLID_DATUM`; ``z = 0``: on the web,
+                  clear of the wheel's local deformation)
 ``displacement``  vertical displacement at ``coord`` on a body *reconstructed  m
                   from its accelerometer*, as the field team does it: the
                   simulated acceleration there goes through the very same
@@ -19,13 +22,22 @@ type              reading                                                       
                   acceleration, and differs by up to 20 % of the signal)
 ``strain``        engineering longitudinal strain of a gauge of length          -
                   ``gauge_length`` centred at ``coord``, at height ``z`` above
-                  the body's neutral axis (:func:`track.post.strain_row`: beams
+                  the body's neutral axis (on the solid: the rail's,
+                  :data:`SOLID_DATUM`) (:func:`track.post.strain_row`: beams
                   from the section rotations at the gauge ends, the solid
                   crossing rail from the axial displacements of two surface
-                  points; seed 000 eq. 1 with its typo fixed: strain = u / L)
+                  points; seed 000 eq. 1 with its typo fixed: strain = u / L;
+                  on the solid that is the exact mean along the gauge of the
+                  tetrahedra's eps_xx, and their eps_xx at the gauge centre
+                  when the gauge lies in one element)
 ================  ============================================================  ========
 
 Signs: displacement and acceleration up +, pressure compressive +, strain tensile +.
+
+Every type works on both track models (``track.model: beam | solid``): sleepers are
+beams either way; on the solid crossing rail a sensor reads the solid's recovered field
+``u = T q`` at a point of its surface (the rows are ``T``'s rows interpolated with the
+quadratic tetrahedra's shape functions there), so it stays a fixed row on ``q``.
 
 :func:`compile_sensors` turns a list of :class:`Sensor` into row vectors on the model's
 generalized coordinates once; :func:`sensor_signals` then reads whole histories with a
@@ -44,6 +56,12 @@ SENSOR_TYPES = ("pressure", "displacement", "acceleration", "strain")
 GAUGE_LENGTH = 0.1   # m: default strain-gauge base (a 100 mm gauge; also the beam element length)
 RECONSTRUCTION_HIGHPASS = 5.0   # Hz: default corner of the displacement reconstruction filter
 RECONSTRUCTION_ORDER = 2        # Butterworth order (applied forward and backward: zero phase)
+# Sensors on the solid crossing rail: z is a height above the neutral axis of the untrimmed rail
+# section, a place on the rail as a field layout gives it (track.solid.crossing.SolidCrossing.gauge_points).
+# Ahead of the nose tip and along it the trimmed head lowers the solid's own neutral axis (52 mm instead
+# of 81.5 mm above the foot ahead of the tip): a foot gauge stays on the foot and reads the solid's
+# strain there, not a lever arm that would put it below the foot.
+SOLID_DATUM = "rail"
 
 
 @dataclass(frozen=True)
@@ -63,7 +81,9 @@ class Sensor:
     coord : float
         Track coordinate on the body: x for rails, y for sleepers [m].
     z : float
-        Strain gauges: height above the body's neutral axis [m] (up +).
+        Height above the body's neutral axis [m] (up +): of a strain gauge; of an
+        accelerometer on the solid crossing rail (beams: no part). On the solid the
+        datum is the untrimmed rail section's neutral axis (:data:`SOLID_DATUM`).
     gauge_length : float
         Strain gauges: base length [m].
     """
@@ -102,11 +122,47 @@ class CompiledSensors:
         return [s.id for s in self.sensors]
 
 
-def displacement_row(model: TrackModel, body: str, coord: float) -> np.ndarray:
-    """Vertical displacement at ``coord`` on ``body`` as a row on q, shape (n,)."""
-    pm = model.point(body, coord)
+def displacement_row(model: TrackModel, body: str, coord: float, z: float = 0.0) -> np.ndarray:
+    """Vertical displacement at ``coord`` on ``body`` as a row on q, shape (n,).
+
+    Beams: the deflection of the beam axis (``z`` plays no part: the section is rigid).
+    The solid crossing rail: ``u_z`` of its surface point ``z`` [m] above the rail's neutral
+    axis at ``coord`` (:data:`SOLID_DATUM`, :meth:`track.solid.crossing.SolidCrossing.vertical_rows`).
+    """
+    b = model.body(body)
     row = np.zeros(model.n)
+    if b.solid:
+        row[b.gdofs] = b.fom.vertical_rows(np.array([b.local(coord)]), z, datum=SOLID_DATUM)[0]
+        return row
+    pm = model.point(body, coord)
     row[pm.gidx] = pm.weights
+    return row
+
+
+def solid_strain_row(model: TrackModel, body: str, coord: float, z: float,
+                     gauge_length: float = GAUGE_LENGTH) -> np.ndarray:
+    """A strain gauge on the solid crossing rail as a row on q, shape (n,).
+
+    Seed 000 eq. 1 (strain = u / L) between the gauge ends on the solid's surface, ``z`` [m]
+    above the rail's neutral axis (:data:`SOLID_DATUM`): ``(u_x(c + L/2) - u_x(c - L/2)) / L``,
+    the exact mean along the gauge of the quadratic tetrahedra's ``eps_xx``
+    (:meth:`track.solid.crossing.SolidCrossing.gauge_row`).
+
+    Raises
+    ------
+    ValueError
+        The gauge is not on the solid, or its height is outside the rail section.
+    """
+    b = model.body(body)
+    L = float(gauge_length)
+    if not L > 0.0:
+        raise ValueError(f"gauge_length: must be > 0, got {gauge_length!r}")
+    ends = np.array([coord - 0.5 * L, coord + 0.5 * L])
+    s0, s1 = b.origin + b.fom.contact_s[[0, -1]]
+    if ends[0] < s0 - 1e-9 or ends[1] > s1 + 1e-9:
+        raise ValueError(f"gauge {ends[0]:.3f}..{ends[1]:.3f} m is not on {body} ({s0:.3f}..{s1:.3f} m)")
+    row = np.zeros(model.n)
+    row[b.gdofs] = b.fom.gauge_row(b.local(coord), z, L, datum=SOLID_DATUM)
     return row
 
 
@@ -137,7 +193,9 @@ def compile_sensors(model: TrackModel, sensors) -> CompiledSensors:
     Raises
     ------
     ValueError
-        An unknown type, body, or a pressure cell on a body that is not a sleeper.
+        An unknown type, body, a pressure cell on a body that is not a sleeper, or a
+        sensor off its body (a gauge past the body's end, a height outside the solid
+        rail's section).
     """
     sensors = tuple(sensors)
     ns = len(sensors)
@@ -153,9 +211,10 @@ def compile_sensors(model: TrackModel, sensors) -> CompiledSensors:
                 raise ValueError(f"sensor {s.id}: a pressure cell must be under a sleeper, not on {s.body!r}")
             Pb[i] = pressure_weights(model, b.sleeper, s.coord)
         elif s.type in ("displacement", "acceleration"):   # both read an accelerometer
-            Ca[i] = displacement_row(model, s.body, s.coord)
+            Ca[i] = displacement_row(model, s.body, s.coord, s.z)
         elif s.type == "strain":
-            Cq[i] = strain_row(model, s.body, s.coord, s.z, s.gauge_length)
+            row_of = solid_strain_row if b.solid else strain_row
+            Cq[i] = row_of(model, s.body, s.coord, s.z, s.gauge_length)
         else:
             raise ValueError(f"sensor {s.id}: unknown type {s.type!r} (one of {', '.join(SENSOR_TYPES)})")
     return CompiledSensors(sensors, Cq, Ca, Pb)
@@ -251,4 +310,4 @@ def displacement_from_acceleration(acc: np.ndarray, dt: float, f_c: float = RECO
 
 
 __all__ = ["Sensor", "SENSOR_TYPES", "CompiledSensors", "compile_sensors", "sensor_signals",
-           "displacement_row", "pressure_weights", "displacement_from_acceleration"]
+           "displacement_row", "solid_strain_row", "SOLID_DATUM", "pressure_weights", "displacement_from_acceleration"]

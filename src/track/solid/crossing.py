@@ -32,8 +32,10 @@ path nodes around it (retained coordinates, so no residual flexibility term).
 Outputs recovered from the solid (:class:`SolidCrossing`): the section
 deflection (distributing-coupling average) and the section bending moment at
 every mesh station (``track.reduction.element_length`` apart), from the
-internal nodal forces of the elements left of the station plane; axial
-displacements at any surface point (strain gauges).
+internal nodal forces of the elements left of the station plane; at any surface
+point (sensors, :meth:`SolidCrossing.gauge_points`) the axial displacement (gauge
+strains), the vertical displacement (accelerometers) and ``eps_xx`` from the
+quadratic tetrahedra's displacement gradient, each a row on the reduced coordinates.
 
 Cost and cache
 --------------
@@ -60,7 +62,7 @@ import scipy.sparse as sp
 from ..params import RAIL_60E1, BeamProfile
 from .body import SolidRailParams, solid_rail
 from .coupling import surface_coupling
-from .fem import COORD_TOL, assemble, faces_on_plane, probe_matrix, surface_moments
+from .fem import COORD_TOL, assemble, faces_on_plane, shape_rows, surface_moments
 from .mesh import CrossingGeometry
 from .section import RailSection, polygon_properties, rail_60e1_like
 
@@ -176,20 +178,106 @@ class SolidCrossing:
             return float(self.section.properties.centroid[1])
         return trimmed_section_properties(self.section, cg.cut_height, float(cg.half_width(s)))[2]
 
-    def axial_rows(self, s: np.ndarray, z: float) -> np.ndarray:
-        """Rows (k, nr) of the axial displacement ``u_x`` [m] of surface points.
+    def gauge_points(self, s: np.ndarray, z: float, datum: str = "section") -> np.ndarray:
+        """Surface points of sensors on the solid, shape (k, 3) [m].
 
-        The points are at ``s`` [m] along the solid, at height ``z`` [m] above the
-        centroid of the (nose-trimmed) section there, on the ``+y`` side surface (a
-        gauge on the rail side).
+        A sensor at ``s`` [m] along the solid, ``z`` [m] above a datum height ``z_d``, sits
+        on the section's outer surface at the height ``z_d + z``, on the ``+y`` side: the
+        surface point reached from the rail's centre plane going outward at that height
+        (the foot edge, the web, the head or the nose flank). It is moved ``GAUGE_INSET``
+        into the solid, so that the element holding it is found
+        (:func:`track.solid.fem.locate`).
+
+        Parameters
+        ----------
+        s : array_like, shape (k,)
+            [m] along the solid.
+        z : float
+            Height above the datum [m], up +.
+        datum : str
+            ``"section"``: the neutral axis of the (nose-trimmed) section at ``s``, its
+            centroid (:meth:`centroid_height`): a lever arm as on a beam
+            (:func:`track.post.strain`). ``"rail"``: the neutral axis of the untrimmed rail
+            section (60E1: 81.5 mm above the foot), the same height all along the solid:
+            a place on the rail, as a field layout gives it (a foot gauge stays on the foot
+            where the trimmed nose lowers the section's neutral axis).
+
+        Raises
+        ------
+        ValueError
+            The height is outside the section (below the foot, above the running surface).
         """
         s = np.atleast_1d(np.asarray(s, dtype=float))
-        zc = np.array([self.centroid_height(si) for si in s])
-        y = np.array([_half_width(self.section, zc_ + z, self.params.crossing, si)
-                      for si, zc_ in zip(s, zc)]) - GAUGE_INSET
-        X = np.column_stack([s, y, zc + z])
-        P = probe_matrix(self.points, self.tets, X)                    # (k, n)
-        return P @ self.T[0::3]
+        return self.surface_points(s, self.datum_heights(s, datum) + z)
+
+    def surface_points(self, s: np.ndarray, heights: np.ndarray) -> np.ndarray:
+        """The ``+y`` surface points at ``s`` [m] and ``heights`` [m] above the foot, moved
+        ``GAUGE_INSET`` inside, shape (k, 3) (see :meth:`gauge_points`)."""
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        h = np.broadcast_to(np.asarray(heights, dtype=float), s.shape)
+        y = np.array([_half_width(self.section, hi, self.params.crossing, si) for si, hi in zip(s, h)])
+        return np.column_stack([s, y - GAUGE_INSET, h])
+
+    def gauge_row(self, s: float, z: float, length: float, datum: str = "section") -> np.ndarray:
+        """Row (nr,) of the strain of a gauge of ``length`` [m] centred at ``s`` [m] (seed 000 eq. 1).
+
+        ``(u_x(s + L/2) - u_x(s - L/2)) / L`` between two surface points at one height, ``z``
+        above the datum *at the gauge centre* (a straight gauge glued along the rail: where
+        the section's centroid moves along the nose taper, ends that followed it would add
+        the section rotation times their height difference). It is the exact mean of the
+        tetrahedra's ``eps_xx`` along the gauge, and their ``eps_xx`` at the centre when the
+        gauge lies in one element (:meth:`axial_rows`, :meth:`strain_rows`).
+        """
+        L = float(length)
+        h = self.datum_heights(np.array([s]), datum)[0] + z
+        N, _ = self._field_rows(self.surface_points(np.array([s - 0.5 * L, s + 0.5 * L]), h))
+        R = N @ self.T[0::3]
+        return (R[1] - R[0]) / L
+
+    def datum_heights(self, s: np.ndarray, datum: str = "section") -> np.ndarray:
+        """Heights [m] above the foot of the datum of :meth:`gauge_points` at ``s`` [m]."""
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        if datum == "section":
+            return np.array([self.centroid_height(si) for si in s])
+        if datum == "rail":
+            return np.full(s.shape, float(self.section.properties.centroid[1]))
+        raise ValueError(f"datum: 'section' or 'rail', got {datum!r}")
+
+    def _field_rows(self, X: np.ndarray):
+        """Shape-function values and gradients at points (:func:`track.solid.fem.shape_rows`)."""
+        return shape_rows(self.points, self.tets, X)
+
+    def axial_rows(self, s: np.ndarray, z: float, datum: str = "section") -> np.ndarray:
+        """Rows (k, nr) of the axial displacement ``u_x`` [m] at the :meth:`gauge_points`.
+
+        ``(u_x(c + L/2) - u_x(c - L/2)) / L`` is a gauge of length ``L`` centred at ``c``
+        (:func:`track.post.strain_row`, :func:`track.sensors.compile_sensors`): the exact
+        mean of the elements' ``eps_xx`` along the gauge line (``u`` is continuous), and,
+        when the gauge lies in one element, the element's ``eps_xx`` at the gauge centre
+        (``u_x`` is quadratic along the line, and a quadratic's chord slope is its slope at
+        the midpoint): :meth:`strain_rows`.
+        """
+        N, _ = self._field_rows(self.gauge_points(s, z, datum))
+        return N @ self.T[0::3]
+
+    def vertical_rows(self, s: np.ndarray, z: float = 0.0, datum: str = "section") -> np.ndarray:
+        """Rows (k, nr) of the vertical displacement ``u_z`` [m] at the :meth:`gauge_points`.
+
+        What an accelerometer on the solid reads (times the accelerations ``a`` instead of
+        ``q``); ``z = 0``: on the web at the neutral axis, where the section's vertical
+        motion is read without the local deformation under the wheel.
+        """
+        N, _ = self._field_rows(self.gauge_points(s, z, datum))
+        return N @ self.T[2::3]
+
+    def strain_rows(self, s: np.ndarray, z: float, datum: str = "section") -> np.ndarray:
+        """Rows (k, nr) of the longitudinal strain ``eps_xx = du_x/dx`` [-] at the :meth:`gauge_points`.
+
+        From the displacement gradient of the quadratic tetrahedra in the element holding
+        each point (:func:`track.solid.fem.shape_rows`): a point gauge.
+        """
+        _, G = self._field_rows(self.gauge_points(s, z, datum))
+        return G[0] @ self.T[0::3]
 
 
 # ----------------------------------------------------------------------------- geometry helpers

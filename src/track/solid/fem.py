@@ -166,6 +166,105 @@ def probe_matrix(points: np.ndarray, tets: np.ndarray, X: np.ndarray) -> sp.csr_
     return sp.csr_matrix((Pk.data, (Pk.row, node_of[Pk.col])), shape=(Pk.shape[0], points.shape[0]))
 
 
+LOCATE_TOL = 1e-9   # barycentric: a point this far outside an element (relative) still lies in it
+
+
+def locate(points: np.ndarray, tets: np.ndarray, X: np.ndarray, tol: float = LOCATE_TOL
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """The element holding each point and the point's barycentric coordinates there.
+
+    The elements are straight-sided (affine), so the barycentric coordinates of a point
+    in element ``e`` with corners ``p0..p3`` solve ``X = p0 + [p1-p0, p2-p0, p3-p0] l``;
+    of the elements whose bounding box holds the point, the one with the largest smallest
+    coordinate is taken (a point on a face between two elements may take either: the
+    field is continuous there).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Node coordinates [m].
+    tets : ndarray of int, shape (m, 10)
+    X : ndarray, shape (k, 3)
+        Points [m].
+    tol : float
+        A point may lie this far outside its element (barycentric units).
+
+    Returns
+    -------
+    elements : ndarray of int, shape (k,)
+    lam : ndarray, shape (k, 4)
+        Barycentric coordinates ``(l0, l1, l2, l3)`` of the corners ``tets[e, :4]``.
+
+    Raises
+    ------
+    ValueError
+        A point in no element (outside the solid).
+    """
+    P = np.asarray(points, dtype=float)
+    C = P[np.asarray(tets)[:, :4]]                                    # (m, 4, 3)
+    lo, hi = C.min(axis=1), C.max(axis=1)
+    X = np.atleast_2d(np.asarray(X, dtype=float))
+    elements, lam = np.empty(X.shape[0], dtype=np.int64), np.empty((X.shape[0], 4))
+    for i, x in enumerate(X):
+        cand = np.flatnonzero(np.all((lo - 1e-9 <= x) & (x <= hi + 1e-9), axis=1))
+        if cand.size:
+            J = np.transpose(C[cand, 1:] - C[cand, :1], (0, 2, 1))     # columns p_j - p0
+            l123 = np.linalg.solve(J, (x - C[cand, 0])[..., None])[..., 0]
+            L = np.column_stack([1.0 - l123.sum(axis=1), l123])
+            best = int(np.argmax(L.min(axis=1)))
+            if L[best].min() >= -tol:
+                elements[i], lam[i] = cand[best], L[best]
+                continue
+        raise ValueError(f"point {tuple(np.round(x, 6))} m is not inside the solid")
+    return elements, lam
+
+
+def shape_rows(points: np.ndarray, tets: np.ndarray, X: np.ndarray
+               ) -> tuple[sp.csr_matrix, list[sp.csr_matrix]]:
+    """Values and gradients of a nodal field at points, in the element holding each point.
+
+    Quadratic tetrahedra in barycentric coordinates (node order of :mod:`track.solid.mesh`):
+    corner ``i``: ``N = l_i (2 l_i - 1)``, ``grad N = (4 l_i - 1) grad l_i``; mid-edge
+    node of edge ``(a, b)``: ``N = 4 l_a l_b``, ``grad N = 4 (l_a grad l_b + l_b grad l_a)``,
+    with ``grad l`` constant in an affine element. So the strain of a displacement field at
+    a point is that of the finite-element solution itself in the element holding it (a
+    field that is linear or quadratic in ``X`` is reproduced exactly).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        [m].
+    tets : ndarray of int, shape (m, 10)
+    X : ndarray, shape (k, 3)
+        Points inside the solid [m] (:func:`locate`).
+
+    Returns
+    -------
+    N : scipy.sparse.csr_matrix, shape (k, n)
+        ``f(X) = N @ f_nodes`` for a scalar nodal field (e.g. ``u[2::3]``).
+    G : list of three scipy.sparse.csr_matrix, shape (k, n)
+        ``df/dx, df/dy, df/dz`` at ``X`` [1/m]: ``G[0] @ u[0::3]`` is ``eps_xx``.
+    """
+    tets = np.asarray(tets)
+    P = np.asarray(points, dtype=float)
+    e, lam = locate(P, tets, X)
+    C = P[tets[e, :4]]                                                # (k, 4, 3)
+    J = np.transpose(C[:, 1:] - C[:, :1], (0, 2, 1))
+    g123 = np.linalg.inv(J)                                           # rows: grad l1, l2, l3
+    grad_l = np.concatenate([-g123.sum(axis=1, keepdims=True), g123], axis=1)   # (k, 4, 3)
+    a, b = TET_EDGES[:, 0], TET_EDGES[:, 1]
+    N = np.concatenate([lam * (2.0 * lam - 1.0), 4.0 * lam[:, a] * lam[:, b]], axis=1)     # (k, 10)
+    dN = np.concatenate([(4.0 * lam - 1.0)[..., None] * grad_l,
+                         4.0 * (lam[:, a, None] * grad_l[:, b] + lam[:, b, None] * grad_l[:, a])], axis=1)
+    k, n = lam.shape[0], P.shape[0]
+    rows, cols = np.repeat(np.arange(k), 10), tets[e].ravel()
+
+    def mat(v):
+        return sp.csr_matrix((v.ravel(), (rows, cols)), shape=(k, n))
+
+    return mat(N), [mat(dN[..., c]) for c in range(3)]
+
+
 def assemble_load(points: np.ndarray, tets: np.ndarray, f, intorder: int = 6) -> np.ndarray:
     """Consistent nodal loads of a body-force field.
 
@@ -450,6 +549,6 @@ def shear_coefficient(section: RailSection, h: float = 0.004) -> float:
     return props.I_y ** 2 / (props.A * energy)
 
 
-__all__ = ["shear_coefficient", "assemble", "assemble_load", "probe_matrix", "boundary_nodes", "lame", "nodes_on_plane", "nodes_on_line", "nearest_node", "seat_nodes",
+__all__ = ["shear_coefficient", "assemble", "assemble_load", "probe_matrix", "locate", "shape_rows", "boundary_nodes", "lame", "nodes_on_plane", "nodes_on_line", "nearest_node", "seat_nodes",
            "faces_on_plane", "SurfaceMoments",
            "surface_moments", "body_force", "strain_energy", "TET_EDGES"]
