@@ -95,12 +95,12 @@ def test_hertz_constant_from_wheel_and_rail_radii():
     F = C delta^1.5 with C independent of the load (Hertz). Derived here: C = 94.1 GN/m^1.5.
 
     Tolerance 10 %: the constant is DESIGN.md's "typical" value, not a derivation for these radii;
-    it lies 7.5 % below the crossed-cylinder value, at the value for an effective lateral radius of
-    0.21 m (the contact band of a coned tread on an inclined, slightly worn head runs off the crown
-    onto the R80 flanks) and within 1.2 % of Zhai's empirical coned-tread constant
+    it lies 7.5 % below the crossed-cylinder value (it is the Hertz value for an effective lateral
+    rail radius of 0.21 m instead of 0.30 m) and within 1.2 % of Zhai's empirical coned-tread constant
     G = 4.57e-8 R^-0.149 m/N^(2/3) (86.0 GN/m^1.5 at R = 0.46 m; Zhai, Vehicle-Track Coupled
-    Dynamics, Springer 2020, ch. 2; quoted as widely cited, the book was not at hand to re-check). A constant off by more than 10 % from Hertz for the nominal radii would
-    change the impact force by > 3 % and is an error.
+    Dynamics, Springer 2020, ch. 2; quoted as widely cited, the book was not at hand to re-check).
+    A constant off by more than 10 % from Hertz for the nominal radii would change the impact force
+    by > 3 % and is an error.
     """
     E_star = E_STEEL / (2.0 * (1.0 - NU_STEEL ** 2))      # two equal steels (Johnson eq. (4.28))
     ref = hertz_by_quadrature(1.0 / (2 * WHEEL_RADIUS), 1.0 / (2 * RAIL_CROWN_RADIUS), 100e3, E_star)

@@ -247,7 +247,8 @@ def transfer(table: ContactTable, iy: int = None) -> dict:
     zn = table.data["z"][table.surfaces.index("nose"), :, iy]
     diff = np.where(np.isfinite(zn), zn, -np.inf) - np.where(np.isfinite(zw), zw, -np.inf)
     above = np.flatnonzero(diff > 0)
-    nan = dict(x=np.nan, tip_impact=False, slope_wing=np.nan, slope_nose=np.nan, angle=np.nan, eta_wing=np.nan, eta_nose=np.nan)
+    nan = dict(x=np.nan, tip_impact=False, slope_wing=np.nan, slope_nose=np.nan, angle=np.nan,
+               eta_wing=np.nan, eta_nose=np.nan)
     if above.size == 0 or above[0] == 0:
         return nan
     k = int(above[0])

@@ -17,11 +17,12 @@ Every profile is a height function of a lateral coordinate, vectorised (arrays i
 
 S1002 wheel (EN 13715, the UIC 510-2 profile): eight sections, a polynomial of degree 8 on the
 tread, of degree 7 at the flange root, circles and a straight 70-degree flank on the flange
-(:data:`S1002_SECTIONS`). The coefficients are those of the standard's definition as widely
-reproduced in the literature and in open railway-dynamics codes (e.g. the DLR set by H. Netter
-used in the wheelset benchmark of Hairer & Wanner's test set); the tests check them against the
-standard's characteristic dimensions (flange height 28 mm, flank angle 70 degrees, back of the
-flange 70 mm from the taping line, continuity of the sections).
+(:data:`S1002_SECTIONS`). The coefficients are those of the standard's definition as reproduced
+in open railway-dynamics teaching codes (the set attributed to H. Netter, DLR Oberpfaffenhofen,
+used with the railway wheelset DAE example); the standard itself was not at hand. The tests check
+them against the standard's characteristic dimensions (flange height 28 mm, flange thickness
+32.5 mm and qR 10.8 mm of a new wheel, flank angle 70 degrees, back of the flange 70 mm from the
+taping line) and the continuity of the sections.
 
 Wear parameters of the wheel (:class:`WheelProfile`), each a smooth change of the new profile:
 flange height (a vertical stretch of the flange above the 10 mm measuring height, tip raised by
