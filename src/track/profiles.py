@@ -411,7 +411,13 @@ class CrossingSections:
     @classmethod
     def from_layout(cls, layout, **kw) -> "CrossingSections":
         """Sections of a turnout :class:`track.layout.Layout` (``layout.geometry()``'s separation,
-        the layout's flangeway and wing-rail end); ``kw`` sets the other attributes."""
+        the layout's flangeway and wing-rail end); ``kw`` sets the other attributes.
+
+        Written for the wheel of the through route that passes the nose (``layout.crossing_side``).
+        The crossing is symmetric about its bisector, so the wheel of the diverging route sees
+        the same sections with x along the through route (its own path is longer by
+        1/cos(angle): 0.3 % at 1:13); a right-hand turnout is the mirror image (``eta`` is always
+        outward from the running edge)."""
         from .layout import CROSSING_WING_END, FLANGEWAY
         geo = layout.geometry()
         if geo is None:
