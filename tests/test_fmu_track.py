@@ -794,15 +794,15 @@ def test_fmu_state_round_trip_restores_the_sensor_outputs(crossing_fmu):
         other.close()
 
 
-def test_build_job_sensor_layout_policy(plain_scenario, scenarios_dir, caplog):
+def test_build_job_sensor_layout_policy(plain_scenario, scenarios_dir):
     """The default layout is drawn for a turnout: on the plain track it does not fit,
-    so build_fmus bakes no sensors and warns; a layout the scenario names must fit."""
-    from orchestrator.inputs.errors import UserInputError
+    so build_fmus bakes no sensors and warns, naming them (a UserInputWarning, printed by
+    the command line); a layout the scenario names must fit."""
+    from orchestrator.inputs.errors import UserInputError, UserInputWarning
     from orchestrator.inputs.sensor_layout import scenario_sensors
 
-    with caplog.at_level(logging.WARNING, logger="orchestrator.cosim.sensing"):
+    with pytest.warns(UserInputWarning, match="default sensor layout does not fit this track: A5, A6, B1"):
         assert scenario_sensors(plain_scenario) == []
-    assert any("default sensor layout does not fit" in r.getMessage() for r in caplog.records)
     named = dataclasses.replace(plain_scenario, sensors=str(scenarios_dir / "sensors" / "in2track_like.yaml"))
     with pytest.raises(UserInputError, match="A5"):
         scenario_sensors(named)

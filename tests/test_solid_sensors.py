@@ -18,7 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import DEFAULT_SCENARIO
+from conftest import DEFAULT_SCENARIO, PLAIN_SCENARIO
 
 from orchestrator.cli import main
 from orchestrator.inputs.scenario import load_scenario
@@ -173,6 +173,20 @@ def test_a_short_solid_run_writes_every_channel(models, tmp_path, capsys):
     assert set(ids) <= set(csv.dtype.names)
     for sid in ids:
         assert np.all(np.isfinite(csv[sid])) and np.any(csv[sid] != 0.0), sid
+
+
+def test_a_default_layout_that_does_not_fit_is_named_not_dropped_silently(tmp_path, capsys):
+    """On a plain track (no crossing rail) the default layout does not fit: the run writes no
+    layout channels and the command line says so in one warning line naming the sensors."""
+    out = tmp_path / "plain"
+    rc = main(["run", str(PLAIN_SCENARIO), "--out", str(out), "--no-progress", "--backend", "inprocess",
+               "--set", "vehicle.fmu=quarter", "--set", "simulation.duration=0.002"])
+    assert rc == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "sensor layout" in ln]
+    assert len(lines) == 1 and lines[0].startswith("turnout: warning: the default sensor layout does not fit")
+    assert "E1, E2, F1, F2 do not" in lines[0] and "Traceback" not in lines[0]
+    names = np.genfromtxt(out / "sensors.csv", delimiter=",", names=True).dtype.names
+    assert not set(load_layout().ids) & set(names)
 
 
 # ----------------------------------------------------------------------------- (4) consistency with the beam

@@ -22,7 +22,6 @@ objects for a given track model. The default layout is
 """
 from __future__ import annotations
 
-import logging
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -37,7 +36,6 @@ from orchestrator.inputs.yaml_io import read_yaml
 from track.model import TrackModel, rail_parts
 from track.sensors import GAUGE_LENGTH, RECONSTRUCTION_HIGHPASS, SENSOR_TYPES, Sensor, compile_sensors
 
-log = logging.getLogger(__name__)
 
 DEFAULT_LAYOUT = "in2track_like.yaml"
 _TOP_KEYS = ("name", "rate", "displacement_highpass", "weights", "sensors", "description")
@@ -289,9 +287,9 @@ def scenario_sensors(scenario, model=None) -> list:
     -------
     list of track.sensors.Sensor
         The scenario's layout: all its sensors. The default layout (the scenario names
-        none): those of its sensors that fit the track; the others (a plain track has no
-        crossing rail) are named in a :class:`UserInputWarning` (the command line prints it),
-        never dropped silently.
+        none, and it is drawn for a turnout): all its sensors, or none where some do not fit
+        the track (a plain track has no crossing rail) -- then a :class:`UserInputWarning`
+        names them and why (the command line prints it as one line), never silently.
 
     Raises
     ------
@@ -308,12 +306,12 @@ def scenario_sensors(scenario, model=None) -> list:
             kept.append(_resolve_one(e, model, f"{layout.source}: sensors[{i}] ({e['id']})"))
         except UserInputError as exc:
             dropped.append((e["id"], str(exc)))
-    if dropped:
-        warnings.warn(f"the default sensor layout does not fit this track: no signals for "
-                      f"{', '.join(d[0] for d in dropped)} (first: {dropped[0][1]}); give the scenario a layout "
-                      "(sensors:) that fits", UserInputWarning, stacklevel=2)
-        log.info("default sensor layout: %d of %d sensors fit this track", len(kept), len(layout.entries))
-    return kept
+    if not dropped:
+        return kept
+    warnings.warn(f"the default sensor layout does not fit this track: {', '.join(d[0] for d in dropped)} "
+                  f"do not ({dropped[0][1]}), so no sensor signals are written; give the scenario a layout "
+                  "(sensors:) that fits", UserInputWarning, stacklevel=2)
+    return []
 
 
 __all__ = ["layout_of", "scenario_sensors", "SensorLayout", "load_layout", "layout_from_dict", "resolve", "default_layout_path"]
