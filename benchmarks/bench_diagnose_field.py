@@ -39,6 +39,7 @@ import datetime
 import json
 import os
 import platform
+import re
 import time
 import traceback
 from pathlib import Path
@@ -66,9 +67,7 @@ def _sleepers_in(obj) -> set[int]:
     out: set[int] = set()
     if isinstance(obj, dict):
         for k, v in obj.items():
-            if "sleeper" in str(k):
-                if isinstance(v, bool):
-                    continue
+            if "sleeper" in str(k) and not isinstance(v, bool):
                 if isinstance(v, int):
                     out.add(v)
                 elif isinstance(v, (list, tuple)):
@@ -82,6 +81,20 @@ def _sleepers_in(obj) -> set[int]:
     return out
 
 
+def _where(ans) -> tuple[list[int], list]:
+    """Where an ``unexplained`` answer puts the residual: (sleepers, edge ``[beyond|before, k]`` or [])."""
+    where = ans.get("where") if isinstance(ans, dict) else None
+    if not isinstance(where, dict):
+        return [], []
+    if "sleeper_nearest_peak" in where or "sleepers_in_window" in where:   # the schema of issue 14
+        ks = {where.get("sleeper_nearest_peak")} | set(where.get("sleepers_in_window") or [])
+        sleepers = sorted(k for k in ks if isinstance(k, int))
+    else:
+        sleepers = sorted(_sleepers_in(where))
+    m = re.search(r"(beyond|before) sleeper (\d+)", str(where.get("edge") or ""))
+    return sleepers, ([m.group(1), int(m.group(2))] if m else [])
+
+
 def _named_list(res: dict) -> list[dict]:
     """The named causes: a list where the diagnosis gives one, else today's single ``named_cause``."""
     ans = res.get("answer")
@@ -92,10 +105,18 @@ def _named_list(res: dict) -> list[dict]:
     return [nc] if nc.get("cause") not in (None, "none", "unexplained") else []
 
 
+def _intervals(c: dict):
+    """A named cause's intervals: ``uncertainty.intervals`` (a list per entry of its parameter vector) or
+    ``intervals`` / ``interval`` (a dict by parameter name)."""
+    unc = c.get("uncertainty") if isinstance(c.get("uncertainty"), dict) else {}
+    return c.get("intervals") or c.get("interval") or unc.get("intervals")
+
+
 def read_answer(res: dict, error: str | None = None) -> dict:
-    """``{"kind", "causes", "where", "gain", "error"}`` of a ``diagnosis.json`` dict (module docstring)."""
+    """``{"kind", "causes", "where", "edge", "gain", "error", "nuisance", "dropped"}`` of a ``diagnosis.json``
+    dict (module docstring); ``kind`` is ``cause``, ``none``, ``unexplained`` or ``error``."""
     if error is not None:
-        return {"kind": "error", "causes": [], "where": [], "gain": None, "error": error}
+        return {"kind": "error", "causes": [], "where": [], "edge": [], "gain": None, "error": error}
     named = _named_list(res)
     ans = res.get("answer")
     kind = ans.get("kind") if isinstance(ans, dict) else ans if isinstance(ans, str) else None
@@ -105,13 +126,13 @@ def read_answer(res: dict, error: str | None = None) -> dict:
     causes = [{"cause": c.get("cause"), "sleeper": c.get("sleeper"),
                "ambiguity": sorted(set((c.get("ambiguity") or {}).get("sleepers") or []) | (
                    {c["sleeper"]} if c.get("sleeper") is not None else set())),
-               "parameters": c.get("parameters") or {},
-               "intervals": c.get("intervals") or c.get("interval") or (c.get("uncertainty") or {}).get("intervals"),
-               "gain": c.get("gain")} for c in named]
-    where = sorted(_sleepers_in(ans)) if kind == "unexplained" and isinstance(ans, dict) else []
-    gain = (res.get("gain") or {}).get("total")
-    return {"kind": kind, "causes": causes, "where": where, "gain": gain, "error": None,
-            "nuisance": res.get("nuisance") or (ans.get("nuisance") if isinstance(ans, dict) else None)}
+               "parameters": c.get("parameters") or {}, "intervals": _intervals(c),
+               "identifiable": (c.get("uncertainty") or {}).get("identifiable") if isinstance(
+                   c.get("uncertainty"), dict) else None, "gain": c.get("gain")} for c in named]
+    where, edge = _where(ans) if kind == "unexplained" else ([], [])
+    return {"kind": kind, "causes": causes, "where": where, "edge": edge, "gain": (res.get("gain") or {}).get("total"),
+            "error": None, "nuisance": res.get("nuisance") or (ans.get("nuisance") if isinstance(ans, dict) else None),
+            "dropped": res.get("dropped")}
 
 
 # ------------------------------------------------------------------------------------------ scoring
@@ -137,8 +158,9 @@ def score(case: dict, ans: dict, sleepers) -> tuple[bool, str]:
     off = [e for e in effects if e["sleeper"] is not None and e["sleeper"] not in sleepers]
     if len(effects) == 1 and off:
         e = off[0]
-        if ans["kind"] == "unexplained" and any(abs(k - e["sleeper"]) <= NEAR for k in ans["where"]):
-            return True, "unexplained, located near the effect"
+        if ans["kind"] == "unexplained" and (any(abs(k - e["sleeper"]) <= NEAR for k in ans["where"])
+                                             or _edge_points_at(ans.get("edge"), e["sleeper"])):
+            return True, "unexplained, located at the effect or towards it"
         if len(track) == 1 and _matches(e, track[0], MAX_AMBIGUITY_OFF):
             return True, "named, ambiguity set contains the off-sensor sleeper"
     unmatched = list(track)
@@ -148,6 +170,11 @@ def score(case: dict, ans: dict, sleepers) -> tuple[bool, str]:
             return False, f"{_effect_label(e)} not named at its place"
         unmatched.remove(hit)
     return (not unmatched), ("all named" if not unmatched else "an extra track cause named")
+
+
+def _edge_points_at(edge, sleeper: int) -> bool:
+    """An edge statement "at or beyond k" / "at or before k" that holds for ``sleeper``."""
+    return bool(edge) and ((edge[0] == "beyond" and sleeper >= edge[1]) or (edge[0] == "before" and sleeper <= edge[1]))
 
 
 def _effect_label(e: dict) -> str:
@@ -161,23 +188,37 @@ def answer_label(ans: dict) -> str:
     return "+".join(sorted(_effect_label(c) for c in ans["causes"]))
 
 
-def coverage(case: dict, ans: dict) -> tuple[int, int]:
-    """(intervals containing the truth, intervals checked) over the named causes that match an effect."""
-    inside = total = 0
+def _interval_pairs(effect: dict, iv) -> list[tuple[float, list, bool | None]]:
+    """(truth, [lo, hi]) per entry of the effect's parameter vector, from a list or a dict of intervals."""
+    if isinstance(iv, dict):
+        out = []
+        for name, truth in effect["parameters"].items():
+            b = iv.get(name)
+            out += list(zip(np.atleast_1d(truth), b if np.ndim(b) == 2 else [b])) if b is not None else []
+        return out
+    if isinstance(iv, list) and iv:
+        truth = np.atleast_1d(next(iter(effect["parameters"].values())))
+        return list(zip(truth, iv if np.ndim(iv) == 2 else [iv]))
+    return []
+
+
+def coverage(case: dict, ans: dict) -> tuple[int, int, int, int]:
+    """Over the named causes that match an effect: (intervals containing the truth, intervals), and the same
+    over the entries flagged identifiable."""
+    inside = total = inside_id = total_id = 0
     for e in case["effects"]:
         for c in ans["causes"]:
-            iv = c.get("intervals")
-            if not isinstance(iv, dict) or not _matches(e, c, MAX_AMBIGUITY_OFF):
+            if not _matches(e, c, MAX_AMBIGUITY_OFF):
                 continue
-            for name, truth in e["parameters"].items():
-                bounds = iv.get(name)
-                pairs = list(zip(np.atleast_1d(truth), bounds if np.ndim(bounds) == 2 else [bounds])) \
-                    if bounds is not None else []
-                for t, b in pairs:
-                    if b is not None and len(b) == 2:
-                        total += 1
-                        inside += int(b[0] <= t <= b[1])
-    return inside, total
+            ident = c.get("identifiable") or []
+            for i, (t, b) in enumerate(_interval_pairs(e, c.get("intervals"))):
+                if b is None or len(b) != 2 or b[0] is None or b[1] is None:
+                    continue
+                hit = int(b[0] <= t <= b[1])
+                inside, total = inside + hit, total + 1
+                if i < len(ident) and ident[i]:
+                    inside_id, total_id = inside_id + hit, total_id + 1
+    return inside, total, inside_id, total_id
 
 
 # ------------------------------------------------------------------------------------------ running
@@ -205,12 +246,27 @@ def run_case(sc, setup: tuple, family: str, seed: int, workers: int, folder: Pat
     except Exception as exc:   # noqa: BLE001 - a crash is an answer to record (issue 14: never a traceback)
         res, error = {}, f"{type(exc).__name__}: {exc}"
         (folder / "traceback.txt").write_text(traceback.format_exc())
-    ans = read_answer(res, error)
-    truth = case.as_dict()
-    right, why = score(truth, ans, sleepers)
-    return {"family": family, "seed": seed, "truth": truth, "answer": ans, "right": right, "why": why,
-            "label": answer_label(ans), "coverage": coverage(truth, ans), "wall": time.perf_counter() - t0,
-            "runs": res.get("runs")}
+    return scored({"family": family, "seed": seed, "truth": case.as_dict(), "wall": time.perf_counter() - t0,
+                   "runs": res.get("runs")}, read_answer(res, error), sleepers)
+
+
+def scored(row: dict, ans: dict, sleepers) -> dict:
+    """The row with its answer, score, label and interval coverage."""
+    right, why = score(row["truth"], ans, sleepers)
+    return {**row, "answer": ans, "right": right, "why": why, "label": answer_label(ans),
+            "coverage": coverage(row["truth"], ans)}
+
+
+def rescored(rows: list[dict], out: Path) -> list[dict]:
+    """The rows scored anew from each case's ``out/diagnosis.json`` (``--report-only``: this file's rules)."""
+    sleepers = instrumented_sleepers(load_scenario(SCENARIO))
+    new = []
+    for r in rows:
+        path = out / f"{r['family']}_{r['seed']}" / "out" / "diagnosis.json"
+        ans = read_answer(json.loads(path.read_text())) if path.is_file() and r["answer"]["kind"] != "error" \
+            else r["answer"]
+        new.append(scored({k: r[k] for k in ("family", "seed", "truth", "wall", "runs")}, ans, sleepers))
+    return new
 
 
 def run_all(families, seeds: int, workers: int, out: Path, stage: str = "all") -> list[dict]:
@@ -282,7 +338,8 @@ def _answer_text(ans: dict) -> str:
     if ans["kind"] == "error":
         return f"error: {ans['error'][:160]}"
     if ans["kind"] != "cause":
-        return ans["kind"] + (f" near sleepers {ans['where']}" if ans["where"] else "")
+        edge = f", {ans['edge'][0]} sleeper {ans['edge'][1]}" if ans.get("edge") else ""
+        return ans["kind"] + (f" near sleepers {ans['where']}" if ans.get("where") else "") + edge
     return "; ".join(f"{c['cause']}" + (f"@{c['sleeper']} (set {c['ambiguity']})" if c["sleeper"] is not None else "")
                      for c in ans["causes"])
 
@@ -301,11 +358,14 @@ def summary(rows: list[dict], seeds: int, wall: float | None) -> str:
         need = GAIN_MIN_MISMATCH if "with model mismatch" in g else GAIN_MIN
         out.append(f"- gain of right answers, {g}: min {_pct(min(v))}, median {_pct(float(np.median(v)))}; "
                    f">= {_pct(need)} in {sum(x >= need for x in v)}/{len(v)}")
-    inside, total = (sum(r["coverage"][i] for r in rows) for i in (0, 1))
-    out.append(f"- interval coverage: {inside}/{total} intervals contain the truth" if total
+    inside, total, inside_id, total_id = (sum(r["coverage"][i] for r in rows) for i in range(4))
+    out.append(f"- interval coverage: {inside}/{total} intervals of named causes that match the truth contain it "
+               f"({inside_id}/{total_id} of those flagged identifiable)" if total
                else "- interval coverage: no intervals in diagnosis.json")
     nuis = [r for r in rows if r["answer"].get("nuisance")]
     out.append(f"- nuisance estimates reported in {len(nuis)}/{len(rows)} diagnoses")
+    dropped = [r for r in rows if r["answer"].get("dropped")]
+    out.append(f"- diagnoses that dropped variants (with a reason): {len(dropped)}/{len(rows)}")
     errors = [r for r in rows if r["answer"]["kind"] == "error"]
     out.append(f"- diagnoses that ended in an exception: {len(errors)}/{len(rows)}")
     out += ["", "Misses (family, seed: truth -> answer, gain):", ""]
@@ -339,7 +399,7 @@ def main() -> None:
     out, t0 = Path(args.out), time.perf_counter()
     if args.report_only:
         rows, wall = [json.loads(s) for s in (out / "rows.jsonl").read_text().splitlines() if s.strip()], None
-        rows = [r for r in rows if r["family"] in families]
+        rows = rescored([r for r in rows if r["family"] in families], out)
     else:
         rows = run_all(families, args.seeds, args.workers, out, args.stage)
         wall = time.perf_counter() - t0
