@@ -53,9 +53,10 @@ class Comparison:
     n : int
         Valid samples over all channels.
     residuals : dict
-        id -> residual s - m on the measured time base (NaN where masked).
+        id -> residual g s - m on the measured time base (NaN where masked); g is the
+        channel's gain (:attr:`Target.gains`, 1 unless a channel was judged mis-calibrated).
     simulated : dict
-        id -> the simulation on the measured time base.
+        id -> the simulation on the measured time base (before any channel gain).
     """
 
     shift: float
@@ -130,7 +131,7 @@ def on_measured_base(measured, t_sim: np.ndarray, sim: dict, shift: float, types
 
 def compare(measured, t_sim: np.ndarray, sim: dict, groups: dict, weights: dict, sigma: dict,
             shift: float | None = None, max_shift: float | None = None, types: dict | None = None,
-            highpass: float | None = None, scale: dict | None = None) -> Comparison:
+            highpass: float | None = None, scale: dict | None = None, gains: dict | None = None) -> Comparison:
     """Residuals, nRMSE per channel, J and chi-square of a simulation against a measurement.
 
     Parameters
@@ -151,6 +152,9 @@ def compare(measured, t_sim: np.ndarray, sim: dict, groups: dict, weights: dict,
         Sensor id -> type; with ``highpass`` [Hz], displacement channels of ``sim`` are
         accelerations, reconstructed on the measured base (:func:`on_measured_base`).
         Without, ``sim`` is compared as it is.
+    gains : dict, optional
+        Sensor id -> gain g of a mis-calibrated channel (measured = g x true): the
+        residual is g s - m (:func:`score`).
     """
     from orchestrator.inputs.measured import align
 
@@ -160,7 +164,7 @@ def compare(measured, t_sim: np.ndarray, sim: dict, groups: dict, weights: dict,
     if shift is None:
         shift = align(measured, t_sim, {k: sim[k] for k in ids}, max_shift=max_shift)
     on = on_measured_base(measured, t_sim, {k: sim[k] for k in ids}, shift, types, highpass)
-    return score(measured, on, groups, weights, sigma, shift, scale)
+    return score(measured, on, groups, weights, sigma, shift, scale, gains)
 
 
 def channel_scales(measured, groups: dict) -> tuple[dict, dict]:
@@ -193,21 +197,23 @@ def channel_scales(measured, groups: dict) -> tuple[dict, dict]:
 
 
 def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: float = 0.0,
-          scale: dict | None = None) -> Comparison:
+          scale: dict | None = None, gains: dict | None = None) -> Comparison:
     """:class:`Comparison` of a simulation already on the measured time base (``on``: id -> (nt,)).
 
     Used directly where simulations are interpolated between runs (the diagnosis's
     screening), so they need not be put on the measured base again. ``scale``: the
     nRMSE normaliser per channel (:func:`channel_scales`); default the std of the
-    measured channel.
+    measured channel. ``gains``: sensor id -> g, the residual is ``g s - m`` (a channel
+    whose measurement chain reads g times the true value); ``on`` stays the simulation.
     """
+    gains = gains or {}
     ids = [k for k in measured.channels if k in on]
     channels, nrmse, residuals = {}, {}, {}
     chi2, n_all = 0.0, 0
     for k in ids:
         m = measured.channels[k]
         s = on[k]
-        r = s - m
+        r = gains.get(k, 1.0) * s - m
         ok = np.isfinite(r)
         n = int(ok.sum())
         if n < 2:
@@ -250,6 +256,10 @@ class Target:
         soak up part of the very differences the diagnosis looks for.
     scale : dict or None
         Sensor id -> the nRMSE normaliser (:func:`channel_scales`).
+    gains : dict
+        Sensor id -> gain g of a channel judged mis-calibrated (measured = g x true; set
+        by :func:`orchestrator.inverse.nuisance.fit_nuisance`): every comparison scores
+        ``g s - m`` on it. Empty: every channel as measured.
     """
 
     measured: object
@@ -257,6 +267,7 @@ class Target:
     sigma: dict
     shift: float | None = None
     scale: dict | None = None
+    gains: dict = field(default_factory=dict)
 
     @classmethod
     def read(cls, path, layout) -> "Target":
@@ -288,12 +299,13 @@ class Target:
             self.align_to(t_sim, sim)
         lay = self.layout
         return compare(self.measured, t_sim, sim, lay.groups, lay.weights, self.sigma, shift=self.shift,
-                       types=lay.types, highpass=lay.displacement_highpass, scale=self.scale)
+                       types=lay.types, highpass=lay.displacement_highpass, scale=self.scale, gains=self.gains)
 
     def score(self, on: dict) -> Comparison:
         """:func:`score` of signals already on the measured time base."""
         lay = self.layout
-        return score(self.measured, on, lay.groups, lay.weights, self.sigma, self.shift or 0.0, self.scale)
+        return score(self.measured, on, lay.groups, lay.weights, self.sigma, self.shift or 0.0, self.scale,
+                     self.gains)
 
     def weighted_residuals(self, cmp: Comparison) -> np.ndarray:
         """One vector whose sum of squares is ``sum_g w_g mean_{i in g} nRMSE_i^2 / sum_g w_g``.
