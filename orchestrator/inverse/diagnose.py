@@ -23,9 +23,10 @@ module that applies it):
    holds with any sensor group held out. Candidates within ΔBIC 10 of it on the
    effective sample size cannot be told apart from it: its ambiguity set.
 5. **Round 2, forward selection** (:func:`_second_round`): with a cause named, the
-   :data:`SECOND_ROUND` next-best candidates of round 1 are screened and fitted on top of
-   the extended model, and a second cause is named by the same rule relative to it
-   (at most :data:`MAX_CAUSES`), each with its own gain.
+   :data:`SECOND_ROUND` next-best candidates of round 1 are screened on top of the
+   extended model and the :data:`SECOND_CONFIRM` best of them fitted, and a second
+   cause is named by the same rule relative to it (at most :data:`MAX_CAUSES`), each
+   with its own gain.
 6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,
    identifiability and which sensors would pin it:
    :mod:`orchestrator.inverse.uncertainty`); else ``none`` when the residual is at the
@@ -74,7 +75,8 @@ from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, MIN_SHARE, NON
 
 SENSOR_REACH = 1     # local causes on the sleepers carrying sensors +- this many (an effect just beyond them)
 MAX_CAUSES = 2       # causes named at most (forward selection)
-SECOND_ROUND = 4     # candidates of round 1 (next best) screened again on top of the first named cause
+SECOND_ROUND = 4     # candidates of round 1 (next best) screened again on top of the first named cause, ...
+SECOND_CONFIRM = 2   # ... of which this many are re-run and fitted
 
 
 def _parse_validate(texts) -> list[tuple[Path, float]]:
@@ -216,10 +218,12 @@ def _nuisance(pool: Pool, inp: _Inputs, base: Evaluated) -> tuple[dict, Evaluate
     nuisance estimates' JSON (None, and the nominal scenario, when the nuisance stage is
     not part of this installation). Sets the channel gains on ``inp.target``.
     """
-    try:
-        from orchestrator.inverse.nuisance import fit_nuisance
-    except ImportError:
+    import importlib.util
+
+    if importlib.util.find_spec("orchestrator.inverse.nuisance") is None:
         return inp.raw0, base, None
+    from orchestrator.inverse.nuisance import fit_nuisance
+
     nz = fit_nuisance(pool, inp.target, inp.raw0, base.cmp)
     return nz.raw, Evaluated(Candidate("none"), np.zeros(0), nz.cmp, 0, "nominal"), nz.to_json()
 
@@ -275,7 +279,7 @@ def _rounds(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated) -> tuple[list[_
         nxt = _second_round(rounds[0], named)
         if not nxt:
             break
-        rounds.append(select(pool, inp.target, raw, pick, sum(n.e.k for n in named), nxt))
+        rounds.append(select(pool, inp.target, raw, pick, sum(n.e.k for n in named), nxt, SECOND_CONFIRM))
     return named, rounds, evidence
 
 
@@ -303,8 +307,13 @@ def _entry(e: Evaluated, rd: Round, rnd: int, ev: Evidence | None) -> CauseFit:
                     sleeper=None if e.candidate.sleeper is None else int(e.candidate.sleeper))
 
 
-def _named_entry(n: _Named, rnd: int) -> CauseFit:
-    """A named cause: its entry, its ambiguity set and its 90 % intervals (:mod:`orchestrator.inverse.uncertainty`)."""
+def _named_entry(n: _Named, rnd: int, reach: tuple[int, int]) -> CauseFit:
+    """A named cause: its entry, its ambiguity set and its 90 % intervals (:mod:`orchestrator.inverse.uncertainty`).
+
+    ``reach``: the first and last sleeper local candidates were placed on. A local cause
+    named on one of them could as well sit further out, where nothing was screened: its
+    ambiguity set says so (``open_beyond``).
+    """
     from orchestrator.inverse.uncertainty import cause_uncertainty
 
     entry = _entry(n.e, n.round, rnd, n.evidence)
@@ -313,6 +322,10 @@ def _named_entry(n: _Named, rnd: int) -> CauseFit:
                                           if o.candidate.label in twins and o.candidate.cause == n.e.candidate.cause})
                       - {None})
     entry.ambiguity = {"candidates": [n.e.candidate.label] + twins, "sleepers": sleepers}
+    if entry.sleeper is not None and entry.sleeper in reach:
+        step = 1 if entry.sleeper == reach[1] else -1
+        entry.ambiguity["open_beyond"] = (f"sleeper {entry.sleeper} is the outermost screened: the cause may as well "
+                                          f"sit on sleeper {entry.sleeper + step} or further, not screened")
     fitter = n.round.fitters.get(n.e.candidate)
     if fitter is not None:
         entry.uncertainty = cause_uncertainty(fitter, n.e.values, n.evidence.n_eff)
@@ -398,7 +411,7 @@ def _settings(cands: list[Candidate]) -> dict:
     """The thresholds of the diagnosis and the candidates' labels (``diagnosis.json`` ``settings``)."""
     return {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL, "none_margin": NONE_MARGIN,
             "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH, "max_causes": MAX_CAUSES,
-            "second_round": SECOND_ROUND, "candidates": [c.label for c in cands]}
+            "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM, "candidates": [c.label for c in cands]}
 
 
 def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: Comparison) -> None:
@@ -415,7 +428,9 @@ def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: C
 def _result(inp: _Inputs, base: Evaluated, ref: Evaluated, ref_raw: dict, named: list, rounds: list,
             evidence: dict) -> tuple[Answer, list[CauseFit], CauseFit, Comparison]:
     """Steps 4-6 as typed results: the answer, every candidate's entry, ``named_cause``, the final comparison."""
-    named_entries = [_named_entry(n, i + 1) for i, n in enumerate(named)]
+    local = [c.sleeper for c in inp.cands if c.sleeper is not None]
+    reach = (min(local), max(local)) if local else (-1, -1)
+    named_entries = [_named_entry(n, i + 1, reach) for i, n in enumerate(named)]
     final = named[-1].e.cmp if named else ref.cmp
     first = rounds[0]
     best_ev = evidence.get((1, first.real[0].candidate)) if first.real else None
@@ -481,4 +496,5 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
     return result
 
 
-__all__ = ["diagnose", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "MAX_CAUSES", "SECOND_ROUND"]
+__all__ = ["diagnose", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "MAX_CAUSES", "SECOND_ROUND",
+           "SECOND_CONFIRM"]

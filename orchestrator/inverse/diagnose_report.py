@@ -111,7 +111,9 @@ def _verdict_lines(result: Diagnosis) -> list[str]:
                           f" → {c.objective:.4g} (gain {100 * c.gain:.1f} %, "
                           f"{100 * s.get('share_of_explainable_misfit', float('nan')):.0f} % of the misfit above the "
                           f"noise); ΔBIC on {s.get('n_eff', 0):.0f} effective samples {s.get('delta_bic_eff', 0):.3g}"
-                          + (f"; cannot be told apart from {', '.join(amb[1:])}" if len(amb) > 1 else "") + "."]
+                          + (f"; cannot be told apart from {', '.join(amb[1:])}" if len(amb) > 1 else "")
+                          + (f"; {c.ambiguity['open_beyond']}" if (c.ambiguity or {}).get("open_beyond") else "")
+                          + "."]
     else:
         lines.append(f"**{a.kind}**: {a.reason}.")
     if a.where:

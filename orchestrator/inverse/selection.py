@@ -191,9 +191,9 @@ def _search(target: Target, cands: list, screened: dict) -> dict:
     return dense
 
 
-def _confirm(pool: Pool, target: Target, raw: dict, ref: Evaluated, dense: dict) -> dict:
-    """Step 3: the :data:`CONFIRM` best screened candidates re-run at their best magnitude."""
-    top = sorted(dense, key=lambda c: dense[c].cmp.chi2)[:CONFIRM]
+def _confirm(pool: Pool, target: Target, raw: dict, ref: Evaluated, dense: dict, confirm: int) -> dict:
+    """Step 3: the ``confirm`` best screened candidates re-run at their best magnitude."""
+    top = sorted(dense, key=lambda c: dense[c].cmp.chi2)[:confirm]
     pool.expect(len(top))
     runs = pool.map([kind_of(c).apply(raw, c.sleeper, dense[c].values) for c in top])
     out = {}
@@ -243,12 +243,17 @@ def _rank(target: Target, ref: Evaluated, k_ref: int, dense: dict, confirmed: di
     return Round(ref, k_ref, real + rest, real, bic, twins, fitters)
 
 
-def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, cands: list) -> Round:
-    """One round (module doc): ``cands`` added one at a time to the reference ``raw`` / ``ref``."""
+def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, cands: list,
+           confirm: int = CONFIRM) -> Round:
+    """One round (module doc): ``cands`` added one at a time to the reference ``raw`` / ``ref``.
+
+    ``confirm``: how many of the screened candidates are re-run and fitted (the later
+    rounds of forward selection confirm fewer: they screen only a few).
+    """
     axes = {c: scalar_axis(kind_of(c), raw, c.sleeper) for c in cands}
     pool.expect(sum(len(axes[c][0]) - 1 for c in cands))
     dense = _search(target, cands, _screen(pool, target, raw, ref, cands, axes))
-    confirmed = _confirm(pool, target, raw, ref, dense)
+    confirmed = _confirm(pool, target, raw, ref, dense, confirm)
     fitted, fitters = _fits(pool, target, raw, ref, confirmed)
     return _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)
 
