@@ -155,6 +155,25 @@ def test_default_layout_resolves_every_channel_on_the_solid(models):
     assert reads.all(), [s.id for s, r in zip(on_solid, reads) if not r]
 
 
+@pytest.mark.parametrize("entry, words", [
+    ({"id": "X", "type": "strain", "group": "F", "rail": "crossing", "x": "T-0.3", "z": -0.09},
+     "outside the rail section"),
+    ({"id": "X", "type": "strain", "group": "F", "rail": "crossing", "x": "T+0.88", "z": -0.07},
+     "crosses an end of crossing"),
+    ({"id": "X", "type": "acceleration", "group": "E", "rail": "crossing", "x": "T+40"}, "is off crossing"),
+])
+def test_a_sensor_off_the_solid_is_one_clear_error(models, entry, words):
+    """A gauge below the foot, or across the joint between the solid and a beam part of the block,
+    cannot be read from one body: a one-line UserInputError naming the sensor."""
+    from orchestrator.inputs.errors import UserInputError
+    from orchestrator.inputs.sensor_layout import layout_from_dict
+
+    _, _, solid = models
+    with pytest.raises(UserInputError, match=words) as err:
+        resolve(layout_from_dict({"sensors": [entry]}, "lay.yaml"), solid)
+    assert "(X)" in str(err.value) and "\n" not in str(err.value)
+
+
 def test_a_short_solid_run_writes_every_channel(models, tmp_path, capsys):
     """``turnout run`` with ``track.model: solid`` (quarter vehicle, 10 ms over the nose): sensors.csv
     has a finite column for every sensor of the default layout, and nothing is said about sensors
