@@ -108,7 +108,8 @@ def stage_costs(sc, repeat=1000):
         return K.contact_step(cc.par, cc.cnt, it.q, it.v, it.a, it.F, it.Fc, tc.model.f_gravity,
                               *cc._K, *cc._C, *cc._bal, sh.ldl_Zb, sh.ldl_have, f.perm, f.Lp, f.Li, f.Lx, f.d,
                               xs, zw, cc.wside, ts, etab, ec, es, ent, cc.T, cc.gd, cc.nr, cc.R, cc.Ze, cc.E, cc.fresh,
-                              new[0], new[1], new[2], new[3], Fc1, out, cc.W, cc.surf, cc.wts, cc.work, cc.iwork)
+                              new[0], new[1], new[2], new[3], Fc1, out, cc.W, cc.surf, cc.wts, cc.work, cc.iwork,
+                              cc.yw, *cc._contact_tables, cc.chw)
 
     stale = cc.ent.copy()
     stale[0, 0] = -1

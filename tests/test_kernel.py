@@ -112,7 +112,7 @@ def test_kernel_wheel_lookup_matches_model_points():
     functions, compiled).
     """
     from track.cosim import TrackCosim
-    from track.kernel import N_PAR, P_CH, SURF_GIVEN, _locate_wheels, element_tables
+    from track.kernel import N_PAR, P_CH, SURF_GIVEN, _locate_wheels, _stack_tables, element_tables
 
     sc = load_scenario(DEFAULT_SCENARIO, ["track.crossing.impact_angle=0.012"])
     tc = TrackCosim(sc.track, 4, 98100.0, 1e-4, kernel=False)
@@ -132,7 +132,8 @@ def test_kernel_wheel_lookup_matches_model_points():
         m = x.size
         ent = np.full((2, m), -1, np.int64)
         W, surf = np.zeros((m, 4)), np.zeros((m, 2))
-        _locate_wheels(par, x, np.full(m, iside, np.int64), ts, etab, ec, es, ent, W, surf)
+        _locate_wheels(par, x, np.zeros(m), np.full(m, iside, np.int64), ts, etab, ec, es, ent, W, surf,
+                       *_stack_tables([]), np.zeros((m, 2)))
         wheel = 0 if side == "left" else 1     # a wheel on this side (wheel_sides)
         for i, xi in enumerate(x.tolist()):
             name = lay.running_body(side, xi)

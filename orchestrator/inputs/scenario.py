@@ -34,6 +34,7 @@ import yaml
 from orchestrator.inputs import keypath
 from orchestrator.inputs.errors import ScenarioError, UserInputError
 from orchestrator.inputs.schema import SCHEMA, KeyDoc, scenario_keys
+from orchestrator.inputs.schema_contact import contact_params
 from orchestrator.inputs.schema_nodes import Ctx, Invalid, describe, node_at
 from orchestrator.inputs.specs import BUILTIN_VEHICLES, PortMap, SimulationSpec, VehicleSpec
 from orchestrator.inputs.yaml_io import YamlLoader, dump_yaml, read_yaml, yaml_error_message
@@ -235,12 +236,13 @@ def scenario_from_dict(data: Mapping, source: str = "<dict>", overrides: Iterabl
 
 def _build(raw: dict, source: str) -> Scenario:
     """The validated raw dict -> :class:`Scenario` (the model's dataclasses)."""
-    return Scenario(name=raw["name"], track=_track_params(raw["track"]), vehicle=_vehicle_spec(raw["vehicle"]),
+    return Scenario(name=raw["name"], track=_track_params(raw["track"], raw["vehicle"]),
+                    vehicle=_vehicle_spec(raw["vehicle"]),
                     simulation=SimulationSpec(**raw["simulation"]), sensors=raw["sensors"], source=source, raw=raw)
 
 
-def _track_params(t: dict) -> TrackParams:
-    """The validated ``track`` section -> :class:`track.params.TrackParams`."""
+def _track_params(t: dict, vehicle: dict) -> TrackParams:
+    """The validated ``track`` section (and ``vehicle``'s wheel geometry) -> :class:`track.params.TrackParams`."""
     lay, pad, bal = t["layout"], t["rail_pad"], t["ballast"]
     return TrackParams(
         model=t["model"],
@@ -257,6 +259,7 @@ def _track_params(t: dict) -> TrackParams:
         impact_angle=t["crossing"]["impact_angle"],
         structural_damping=t["structural_damping"],
         dipped_joint=t["dipped_joint"],
+        contact=contact_params(t, vehicle),
     )
 
 

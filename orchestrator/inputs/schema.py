@@ -39,6 +39,12 @@ from orchestrator.inputs.schema_nodes import (
     dataclass_defaults,
     describe,
 )
+from orchestrator.inputs.schema_contact import (
+    check_wheel,
+    crossing_profiles_section,
+    irregularity_section,
+    wheel_fields,
+)
 from orchestrator.inputs.specs import (
     BUILTIN_VEHICLES,
     STEP_MULTIPLE_RTOL,
@@ -54,6 +60,7 @@ from track.params import (
     LayoutParams,
     RailPadParams,
     ReductionParams,
+    ContactParams,
     TrackParams,
 )
 
@@ -225,6 +232,9 @@ def _post_track(out, given, path, ctx):
     if out["model"] == "solid" and layout["type"] == "plain":
         raise Invalid(path + ("model",), "'solid' models the 3D crossing rail; a plain layout has none "
                                          "(use model: beam)")
+    if out["crossing"]["geometry"] == "profiles" and out["dipped_joint"] > 0.0:
+        raise Invalid(path + ("dipped_joint",), "the dipped joint is a dip-model geometry; not with "
+                                                "track.crossing.geometry: profiles")
     if layout["type"] == "turnout" and out["dipped_joint"] > 0.0:
         raise Invalid(path + ("dipped_joint",), "only for plain track (the Jenkins P2 verification case); "
                                                 "a turnout's geometry defect is track.crossing.impact_angle")
@@ -250,6 +260,7 @@ def _post_vehicle(out, given, path, ctx):
                 raise Invalid(path + ("ports", i, "Fz"),
                               f"input {port['Fz']!r} is already the force of wheel {seen[port['Fz']] + 1}")
             seen[port["Fz"]] = i
+    check_wheel(out, path)
     return out
 
 
@@ -372,6 +383,7 @@ def _reduction_section() -> Map:
 def _track_section() -> Map:
     """``track``: the model choice, its sub-sections and the geometry defects (defaults: TrackParams)."""
     T = dataclass_defaults(TrackParams)
+    C = dataclass_defaults(ContactParams)
     return Map({
         "model": Field(Str(("beam", "solid")), T["model"], "beam crossing rail or 3D solid crossing rail"),
         "layout": Field(_layout_section(), SUB),
@@ -379,7 +391,12 @@ def _track_section() -> Map:
         "ballast": Field(_ballast_section(), SUB),
         "crossing": Field(Map({
             "impact_angle": Field(_ANGLE, T["impact_angle"], "[rad] dip angle of the crossing"),
+            "geometry": Field(Str(("dip", "profiles")), C["geometry"],
+                              "dip: the impact angle's vertical dip, one Hertz constant; profiles: contact "
+                              "tables of the wheel profile on the wing rail, nose and plain rail"),
+            "profiles": Field(crossing_profiles_section(), SUB),
         }), SUB),
+        "irregularity": Field(irregularity_section(), SUB),
         "reduction": Field(_reduction_section(), SUB),
         "structural_damping": Field(_NONNEG, T["structural_damping"], "[s] stiffness-proportional Rayleigh beta"),
         "dipped_joint": Field(_ANGLE, T["dipped_joint"],
@@ -405,6 +422,7 @@ def _vehicle_section() -> Map:
             "Fz_sign": Field(_SIGN, 1, "as z_sign, for Fz (force on the wheel, up)"),
         })), [], "third-party FMU only: one entry per wheel"),
         "start_values": Field(ScalarMap(), {}, "FMU start values by variable name"),
+        **wheel_fields(),
     }, post=_post_vehicle)
 
 

@@ -160,3 +160,51 @@ def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
                 "j_rail": j_r, "j_sleeper": j_s, "loads_t": loads_t, "rail_hist": rail_hist, "sleeper": sl,
                 "y_p": y_p, "p_t": p_t}
     return out
+
+
+SURFACE_NAMES = ("rail", "nose")   # parts[..., 0]: the running or wing rail; parts[..., 1]: the nose
+
+
+def profile_contact(contact, model: TrackModel, res) -> tuple[dict, dict]:
+    """Contact geometry outputs of a run with ``track.crossing.geometry: profiles``.
+
+    Per wheel and surface (:func:`track.cosim.profile_outputs` at the recorded x and surface
+    forces): lateral contact position on the rail, rolling radius, Hertz semi-axes a, b and peak
+    pressure p0; per wheel that passes the nose, the impact angle emerging from its recorded
+    vertical path (:func:`track.cosim.emergent_impact_angle`) next to the kinematic one of the
+    contact table (:func:`track.contact_geometry.transfer`, rigid track, no dynamics).
+
+    Returns
+    -------
+    arrays : dict
+        ``eta``, ``radius``, ``a``, ``b``, ``p0``: (nt, m, 2) [m, m, m, m, Pa] (results.h5
+        ``contact_geometry/``).
+    summary : dict
+        ``wheel<i>`` -> ``{surface: {max_p0, and eta, radius, a, b at the largest force}}``, plus
+        ``transfer`` for the wheels on the crossing side.
+    """
+    from track.contact_geometry import transfer
+    from track.cosim import contact_tables, emergent_impact_angle, profile_outputs
+
+    arrays = profile_outputs(model, contact, res.x, res.parts)
+    summary: dict = {}
+    m = res.x.shape[1]
+    crossing, _ = contact_tables(model, contact)
+    sides = wheel_sides(m)
+    for i in range(m):
+        w: dict = {}
+        for k, name in enumerate(SURFACE_NAMES):
+            F = res.parts[:, i, k]
+            if not (F > 0).any():
+                continue
+            j = int(np.nanargmax(F))
+            w[name] = {"max_force": float(F[j]), "max_p0": float(np.nanmax(arrays["p0"][:, i, k])),
+                       **{q: float(arrays[q][j, i, k]) for q in ("eta", "radius", "a", "b", "p0")}}
+        if crossing is not None and sides[i] == model.layout.crossing_side:
+            em = emergent_impact_angle(res.x[:, i], res.z[:, i], res.parts[:, i, 1], res.parts[:, i, 0])
+            iy = int(np.argmin(np.abs(crossing.table.y - contact.lateral_offset)))
+            kin = transfer(crossing.table, iy)
+            w["transfer"] = {"emergent": em, "kinematic": {"x_transfer": kin["x"], "angle": kin["angle"],
+                                                           "tip_impact": kin["tip_impact"]}}
+        summary[f"wheel{i + 1}"] = w
+    return arrays, summary

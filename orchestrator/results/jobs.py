@@ -19,7 +19,7 @@ from orchestrator.cosim.sensing import read_sensors, sensor_columns
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.track_model import track_model
 from orchestrator.results import plots
-from orchestrator.results.analysis import analyse, analysis_columns
+from orchestrator.results.analysis import analyse, analysis_columns, profile_contact
 from orchestrator.results.outdir import prepare_out_dir
 from orchestrator.results.plots_layout import plot_layout
 from track.frf import receptance
@@ -80,6 +80,9 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     sensors = _virtual_sensors(scenario, model, compiled, res)
     Q0 = 0.5 * scenario.vehicle.axle_load
     summary["contact"] = _contact_summary(res, Q0)
+    geometry = None
+    if scenario.track.contact.geometry == "profiles":     # contact points, patches, emergent impact angle
+        geometry, summary["contact"]["profiles"] = profile_contact(scenario.track.contact, model, res)
     an = analyse(model, Q0, res)
     summary.update(an.scalars)
     meta = getattr(an, "meta", None)
@@ -91,7 +94,7 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     t_write = time.perf_counter()
     # ---- signals first: nothing computed is lost if a later step fails
     _write_signals(out_dir, res, sensors)
-    _write_h5(out_dir / "results.h5", res, sensors, an, states)
+    _write_h5(out_dir / "results.h5", res, sensors, an, states, geometry)
     del states
     if meta is not None:
         _plot_track_results(out_dir, scenario, an)
@@ -236,9 +239,11 @@ def _put(group, name: str, data, compress: bool = True) -> None:
         group.create_dataset(name, data=data)
 
 
-def _write_h5(path, res, sensors: dict, an=None, states: dict | None = None) -> None:
+def _write_h5(path, res, sensors: dict, an=None, states: dict | None = None, geometry: dict | None = None) -> None:
     """results.h5 (README "What `turnout run` writes"): ``signals/``, ``sensors/``, ``bodies/`` and
-    ``analysis/`` (from ``an``), and ``track/`` (the reduced states) only when ``states`` are given."""
+    ``analysis/`` (from ``an``), ``contact_geometry/`` (profile contact: per time, wheel and surface
+    ``eta``, ``radius``, ``a``, ``b`` [m], ``p0`` [Pa]) and ``track/`` (the reduced states) only when
+    ``states`` are given."""
     import h5py
 
     with h5py.File(path, "w") as f:
@@ -262,6 +267,13 @@ def _write_h5(path, res, sensors: dict, an=None, states: dict | None = None) -> 
         if an is not None and an.arrays:
             g = f.create_group("analysis")
             for k, v in an.arrays.items():
+                _put(g, k, v)
+        if geometry is not None:
+            g = f.create_group("contact_geometry")
+            g.attrs["description"] = ("profile contact per time, wheel and surface (rail or wing rail, nose): "
+                                      "eta lateral contact position on the rail [m], radius rolling radius [m], "
+                                      "a, b Hertz semi-axes along / across [m], p0 peak pressure [Pa]; NaN unloaded")
+            for k, v in geometry.items():
                 _put(g, k, v)
         if states is not None:
             g = f.create_group("track")

@@ -18,6 +18,12 @@ slope ``beta_n`` and meets the wing-rail level at the transfer point; the vertic
 heading of the wheel changes there by ``beta = beta_w + beta_n`` (the impact angle).
 The nose reaches the nominal level at ``x_full`` and stays there. A measured
 geometry can be given as a table of (x, z_wing, z_nose) instead.
+
+Profile contact (:class:`TableGeometry`): the surface heights ``z_k`` and the Hertz constants
+``C_k`` (vertical force per vertical approach^1.5) of each surface are looked up bilinearly in
+tables over x and the wheelset's lateral offset y built from the wheel and rail profiles
+(:mod:`track.contact_geometry`); the force law is the same per surface, with its own constant
+(:func:`hertz_pair`).
 """
 from __future__ import annotations
 
@@ -155,6 +161,81 @@ def hertz(w: float, z_wheel: float, surfaces: tuple[float, float], c_h: float = 
         F2 = c_h * d2 * s
         k += 1.5 * c_h * s
     return F1 + F2, k, F1, F2
+
+
+def hertz_pair(w: float, z_wheel: float, z1: float, z2: float, c1: float, c2: float
+               ) -> tuple[float, float, float, float]:
+    """:func:`hertz` with a Hertz constant per surface (``c1``, ``c2`` [N/m^1.5]): the same
+    operations, so with ``c1 = c2 = c_h`` the same numbers to the last bit."""
+    d1 = z1 + w - z_wheel
+    d2 = z2 + w - z_wheel
+    F1 = F2 = k = 0.0
+    if d1 > 0.0:
+        s = sqrt(d1)
+        F1 = c1 * d1 * s
+        k += 1.5 * c1 * s
+    if d2 > 0.0:
+        s = sqrt(d2)
+        F2 = c2 * d2 * s
+        k += 1.5 * c2 * s
+    return F1 + F2, k, F1, F2
+
+
+def table_surface(xw: float, yw: float, grid, tz, tc) -> tuple[float, float, float, float]:
+    """Bilinear lookup of one contact table (:class:`TableGeometry`) at track coordinate ``xw`` and
+    lateral offset ``yw`` [m] (clipped to the grid): ``(z1, z2, c1, c2)``.
+
+    ``grid = (x0, dx, nx, y0, dy, ny)``; ``tz``, ``tc`` (2, NX, NY) with NaN where a surface is
+    absent. A surface with a NaN corner in the cell is absent there (height :data:`NO_SURFACE`,
+    constant 0).
+    """
+    x0, dx, nx, y0, dy, ny = grid[0], grid[1], int(grid[2]), grid[3], grid[4], int(grid[5])
+    tx = min(max((xw - x0) / dx, 0.0), nx - 1.0)
+    ix = min(int(tx), nx - 2)
+    fx = tx - ix
+    ty = min(max((yw - y0) / dy, 0.0), ny - 1.0)
+    iy = min(int(ty), ny - 2)
+    fy = ty - iy
+    w00, w10, w01, w11 = (1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy
+    z1 = w00 * tz[0, ix, iy] + w10 * tz[0, ix + 1, iy] + w01 * tz[0, ix, iy + 1] + w11 * tz[0, ix + 1, iy + 1]
+    z2 = w00 * tz[1, ix, iy] + w10 * tz[1, ix + 1, iy] + w01 * tz[1, ix, iy + 1] + w11 * tz[1, ix + 1, iy + 1]
+    c1 = w00 * tc[0, ix, iy] + w10 * tc[0, ix + 1, iy] + w01 * tc[0, ix, iy + 1] + w11 * tc[0, ix + 1, iy + 1]
+    c2 = w00 * tc[1, ix, iy] + w10 * tc[1, ix + 1, iy] + w01 * tc[1, ix, iy + 1] + w11 * tc[1, ix + 1, iy + 1]
+    if not (z1 == z1):          # NaN: absent at a corner
+        z1, c1 = NO_SURFACE, 0.0
+    if not (z2 == z2):
+        z2, c2 = NO_SURFACE, 0.0
+    return z1, z2, c1, c2
+
+
+@dataclass(frozen=True, eq=False)
+class TableGeometry:
+    """Surface heights and Hertz constants from a contact table (profile contact).
+
+    Attributes
+    ----------
+    grid : ndarray (6,)
+        ``(x0, dx, nx, y0, dy, ny)`` of the regular grid (nx, ny >= 2).
+    z : ndarray (2, nx, ny)
+        Surface heights [m] (:mod:`track.contact_geometry`'s ``z``; NaN where absent).
+    c : ndarray (2, nx, ny)
+        Vertical Hertz constants [N/m^1.5] (``C_vertical``).
+    table : object
+        The :class:`track.contact_geometry.ContactTable` it was made from (outputs).
+    """
+
+    grid: np.ndarray
+    z: np.ndarray
+    c: np.ndarray
+    table: object = None
+
+    def heights(self, x: float, y: float = 0.0) -> tuple[float, float]:
+        """Heights (z1, z2) [m] at track coordinate x and lateral offset y."""
+        return table_surface(x, y, self.grid, self.z, self.c)[:2]
+
+    def constants(self, x: float, y: float = 0.0) -> tuple[float, float]:
+        """Hertz constants (c1, c2) [N/m^1.5] at x, y."""
+        return table_surface(x, y, self.grid, self.z, self.c)[2:]
 
 
 def hertz_deflection(F: float, c_h: float = HERTZ_CONSTANT) -> float:

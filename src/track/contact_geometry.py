@@ -263,3 +263,106 @@ def transfer(table: ContactTable, iy: int = None) -> dict:
     return dict(x=float(xt), tip_impact=bool(tip), slope_wing=float(sw), slope_nose=float(sn), angle=float(sn - sw),
                 eta_wing=float(eta[table.surfaces.index("wing"), k - 1, iy]),
                 eta_nose=float(eta[table.surfaces.index("nose"), k, iy]))
+
+
+# ----------------------------------------------------------------------------- tables of a scenario
+TABLE_DX = 0.005      # m, x step of a crossing table (the wing rail falls ~1 mm per 0.1 m: linear in a step)
+TABLE_DY = 0.001      # m, y step (a constant offset is a grid node; 1 mm between nodes of an offset table)
+_GEOMETRY_CACHE: dict = {}   # content key -> (crossing TableGeometry or None, plain TableGeometry)
+
+
+def wheel_profile(contact):
+    """The :class:`track.profiles.WheelProfile` of :class:`track.params.ContactParams`."""
+    from .profiles import WheelProfile
+    if contact.wheel_table:
+        return WheelProfile(table=tuple(np.asarray(v, dtype=float) for v in contact.wheel_table))
+    return WheelProfile(**dict(contact.wheel))
+
+
+def lateral_offsets(contact) -> np.ndarray:
+    """The wheelset offsets [m] the scenario reaches (its constant or the table's values)."""
+    if contact.lateral_offset_table:
+        return np.asarray(contact.lateral_offset_table[1], dtype=float)
+    return np.array([float(contact.lateral_offset)])
+
+
+def _y_grid(lo: float, hi: float) -> np.ndarray:
+    """Evenly spaced offsets (step TABLE_DY) from ``lo - TABLE_DY`` covering ``hi + TABLE_DY``: ``lo``
+    is a node, so a constant offset is looked up without interpolation."""
+    n = int(np.ceil((hi - lo) / TABLE_DY - 1e-9)) + 3
+    return lo - TABLE_DY + TABLE_DY * np.arange(n)
+
+
+def table_geometry(table: ContactTable):
+    """:class:`track.contact.TableGeometry` of a contact table: heights (NaN where absent) and the
+    vertical Hertz constants, two surfaces (a plain rail's second is absent).
+
+    Where a contact exists but the Hertz solution does not (``B <= 0``: a conformal contact, e.g.
+    a deeply hollow tread), the constant is the largest of that surface's finite ones at the same
+    x (the stiffest nearby contact: the closest a non-conformal model gets to a conformal patch),
+    or at any x when there is none at that x (e.g. the flat outer edge of the wing rail's head far
+    below the wheel, ``B = 0``); where a surface has no finite constant at all, ``ValueError``.
+    """
+    from .contact import TableGeometry
+    z = np.where(np.isfinite(table.data["z"]), table.data["z"], np.nan)
+    c = np.where(np.isfinite(z), table.data["C_vertical"], np.nan)
+    bad = np.isfinite(z) & ~np.isfinite(c)
+    if bad.any():
+        finite = np.where(np.isfinite(c), c, -np.inf)
+        fill = np.max(finite, axis=2, keepdims=True)                       # same x, any offset
+        fill = np.where(np.isfinite(fill), fill, np.max(finite, axis=(1, 2), keepdims=True))   # any x
+        c = np.where(bad, np.broadcast_to(fill, c.shape), c)
+        if (np.isfinite(z) & ~np.isfinite(c)).any():
+            raise ValueError("contact table: a surface has no non-conformal contact to take a Hertz constant from")
+    if z.shape[0] == 1:
+        z = np.concatenate([z, np.full_like(z, np.nan)])
+        c = np.concatenate([c, np.full_like(c, np.nan)])
+    x, y = table.x, table.y
+    if x.size == 1:                                   # x-independent: two equal rows
+        x, z, c = np.array([x[0], x[0] + 1.0]), np.repeat(z, 2, axis=1), np.repeat(c, 2, axis=1)
+    grid = np.array([x[0], x[1] - x[0], x.size, y[0], y[1] - y[0], y.size], float)
+    return TableGeometry(grid=grid, z=np.ascontiguousarray(z), c=np.ascontiguousarray(c), table=table)
+
+
+def scenario_tables(layout, contact, x_range: tuple | None = None):
+    """The contact tables of a scenario with ``track.crossing.geometry: profiles``: the wheel on the
+    crossing's wing rail and nose over ``x_range`` (when the layout has a crossing) and on a
+    plain rail of the layout's rail type; cached by content (layout parameters, wheel, crossing
+    parameters, offsets, range).
+
+    Parameters
+    ----------
+    layout : track.layout.Layout
+    contact : track.params.ContactParams
+    x_range : (float, float), optional
+        Track coordinates [m] the crossing table spans (the crossing rail's running segments).
+
+    Returns
+    -------
+    crossing : TableGeometry or None
+        Its lateral offsets are the wheel's field side's: ``+offset`` (the crossing wheel).
+    plain : TableGeometry
+        Offsets ``-|offset|max .. +|offset|max`` (both wheels).
+    """
+    from .profiles import RAIL_HEADS, CrossingSections, PlainRail
+    ys = lateral_offsets(contact)
+    key = repr((layout.params, contact.wheel, contact.wheel_table, contact.crossing, tuple(ys), x_range))
+    hit = _GEOMETRY_CACHE.get(key)
+    if hit is not None:
+        return hit
+    wheel = wheel_profile(contact)
+    head = RAIL_HEADS.get(getattr(layout.params, "rail", "60E1"), RAIL_HEADS["60E1"])
+    plain_rail = PlainRail(head=head)
+    ymax = float(np.max(np.abs(ys)))
+    gauge = float(getattr(layout.params, "gauge", 1.435))
+    plain = table_geometry(contact_table(wheel, {"rail": plain_rail.rail}, [0.0], _y_grid(-ymax, ymax), gauge,
+                                         reference=plain_rail.rail))
+    crossing = None
+    if layout.x_tcp is not None and x_range is not None:
+        sections = CrossingSections.from_layout(layout, **dict(contact.crossing))
+        n = int(np.ceil((x_range[1] - x_range[0]) / TABLE_DX)) + 1
+        x = x_range[0] + TABLE_DX * np.arange(n)
+        crossing = table_geometry(crossing_table(wheel, sections, x, _y_grid(float(ys.min()), float(ys.max())),
+                                                 gauge, reference=plain_rail.rail))
+    _GEOMETRY_CACHE[key] = (crossing, plain)
+    return crossing, plain

@@ -16,6 +16,14 @@ static position is then ``z_static = surface + w - delta0``. With ``auto_offset`
 the difference between that and the vehicle's own (static) output is kept as an
 offset, so any vehicle that starts in its own static equilibrium starts the
 coupled run without a drop transient.
+
+Contact geometry (``params.contact``, :class:`track.params.ContactParams`): ``dip`` (the
+parameterized crossing, one Hertz constant) or ``profiles``: contact tables of the wheel profile
+on the crossing's wing rail and nose (the crossing rail on the crossing side) and on the plain
+rail (everywhere else), :func:`track.contact_geometry.scenario_tables`, looked up at each wheel's
+x and lateral offset (``+offset`` for the wheels on the crossing side, ``-offset`` on the other:
+the wheelset moves towards the crossing wheel's field side), with a Hertz constant per surface.
+Irregularities (:class:`track.irregularity.Irregularities`) shift each wheel's contact input.
 """
 from __future__ import annotations
 
@@ -23,12 +31,14 @@ import time
 
 import numpy as np
 
-from .contact import HERTZ_CONSTANT, CrossingGeometry, DippedJoint, Flat, hertz_deflection
+from .contact import HERTZ_CONSTANT, CrossingGeometry, DippedJoint, Flat, TableGeometry, hertz_deflection
 from .dynamics import ALPHA_DEFAULT, Counters, PointLoad, TrackIntegrator
 from .kernel import CompiledContacts, kernel_enabled
 from .model import TrackModel, build_track
 from .params import TrackParams
 from .statics import static_equilibrium
+
+IRREGULARITY_MARGIN = 20.0   # m, generated rail irregularity beyond the panel at each end
 
 DIVERGENCE_FACTOR = 50.0   # a contact force above this many static loads means divergence
 FLAT = Flat()
@@ -245,6 +255,17 @@ class TrackCosim:
         self.crossing = None
         if lay.x_tcp is not None:
             self.crossing = CrossingGeometry(lay.x_tcp, lay.x_transition, params.impact_angle)
+        self.contact = getattr(params, "contact", None)
+        self.tables = None                   # profile contact: (crossing, plain) TableGeometry
+        self.irregularities = None
+        self._y_sign = np.array([1.0 if s == (lay.crossing_side or "left") else -1.0 for s in self.sides])
+        if self.contact is not None and self.contact.geometry == "profiles":
+            self.tables = self._contact_tables()
+        if self.contact is not None and self.contact.irregular:
+            from .irregularity import Irregularities
+            xs = [sl.x for sl in lay.sleepers]
+            self.irregularities = Irregularities.from_params(
+                self.contact, self.n, min(xs) - IRREGULARITY_MARGIN, max(xs) - min(xs) + 2 * IRREGULARITY_MARGIN)
         self.joint = None
         if lay.x_tcp is None and params.dipped_joint > 0.0:
             k = len(lay.sleepers) // 2
@@ -263,8 +284,26 @@ class TrackCosim:
         self.wall_factor = 0.0              # ... and of the integrator's set-up (step-matrix LU) [s]
 
     # ------------------------------------------------------------------ geometry
+    def _contact_tables(self):
+        """The (crossing, plain) contact tables of the profile contact (:func:`contact_tables`)."""
+        return contact_tables(self.model, self.contact)
+
+    def lateral_offsets(self, x: np.ndarray) -> np.ndarray:
+        """Each wheel's lateral offset towards its field side [m] at its x (profile contact)."""
+        c = self.contact
+        if c.lateral_offset_table:
+            xt, yt = c.lateral_offset_table
+            return self._y_sign * np.interp(x, xt, yt)
+        return self._y_sign * c.lateral_offset
+
     def surface_geometry(self, side: str, body: str):
         """The geometry (``heights(x) -> (z1, z2)`` [m]) under a wheel on ``side`` running on ``body``."""
+        if self.tables is not None:
+            crossing, plain = self.tables
+            if crossing is not None and side == self.model.layout.crossing_side and \
+                    self.model.body(body).kind == "crossing":
+                return crossing
+            return plain
         if self.crossing is not None and side == self.model.layout.crossing_side and \
                 self.model.body(body).kind == "crossing":
             return self.crossing
@@ -279,10 +318,25 @@ class TrackCosim:
     def _points(self, x: np.ndarray):
         pts, surf = [], []
         running, point = self.model.layout.running_body, self.model.point
+        if self.tables is not None:
+            return self._table_points(x)
         for i, xi in enumerate(x.tolist()):
             body = running(self.sides[i], xi)
             pts.append(point(body, xi))
             surf.append(self.surfaces(i, xi, body))
+        return pts, surf
+
+    def _table_points(self, x: np.ndarray):
+        """Rail points, surface heights [m] and Hertz constants (m, 2) [N/m^1.5] of the profile contact."""
+        pts, surf, ch = [], [], np.empty((self.n, 2))
+        running, point = self.model.layout.running_body, self.model.point
+        for i, (xi, yi) in enumerate(zip(x.tolist(), self.lateral_offsets(x).tolist())):
+            body = running(self.sides[i], xi)
+            geo: TableGeometry = self.surface_geometry(self.sides[i], body)
+            pts.append(point(body, xi))
+            surf.append(geo.heights(xi, yi))
+            ch[i] = geo.constants(xi, yi)
+        self._ch = ch
         return pts, surf
 
     # ------------------------------------------------------------------ stepping
@@ -307,7 +361,13 @@ class TrackCosim:
         self.static = st
         w = np.array([p.value(st.q, -q) for p, q in zip(pts, self.Q0)])
         top = np.array([max(s) for s in surf])
-        self.z_static = top + w - np.array([hertz_deflection(q, self.c_h) for q in self.Q0])
+        if self.tables is not None:      # the constant of the surface that carries the static load
+            c_top = [c[int(np.argmax(s))] for s, c in zip(surf, self._ch)]
+            top = top + self._irregularity(x)
+            self.z_static = top + w - np.array([hertz_deflection(q, c) for q, c in zip(self.Q0, c_top)])
+        else:
+            top = top + self._irregularity(x) if self.irregularities is not None else top
+            self.z_static = top + w - np.array([hertz_deflection(q, self.c_h) for q in self.Q0])
         self.offset = self.z_static - np.asarray(z, float) if self.auto_offset else np.zeros(self.n)
         t_start = time.perf_counter()
         self.integ = TrackIntegrator(self.model, self.h, st.q, loads0=loads, alpha=self.alpha)
@@ -336,11 +396,14 @@ class TrackCosim:
             x = x + self.speed * h
             z = z + np.asarray(vz, float) * h
         zc = z + self.offset
+        if self.irregularities is not None:
+            zc = zc - self._irregularity(x)
         if self._compiled is not None:
-            out = self._compiled.step(x, zc, self.c_h)
+            y = self.lateral_offsets(x) if self.tables is not None else None
+            out = self._compiled.step(x, zc, self.c_h, y)
         else:
             pts, surf = self._points(x)
-            out = self.integ.step_contacts(pts, zc, surf, self.c_h)
+            out = self.integ.step_contacts(pts, zc, surf, self._ch if self.tables is not None else self.c_h)
         self.Fz = out[:, 0]
         self.parts = out[:, 1:3]
         self.rail_w = out[:, 3]
@@ -354,6 +417,12 @@ class TrackCosim:
         if self.record_every and self.integ.k % self.record_every == 0:
             self._record(x)
         return self.Fz
+
+    def _irregularity(self, x: np.ndarray) -> np.ndarray:
+        """Each wheel's irregularity input at x [m] (zeros without irregularities)."""
+        if self.irregularities is None:
+            return np.zeros(self.n)
+        return self.irregularities.at(x, self.sides)
 
     def _attach_kernel(self) -> None:
         self._compiled = CompiledContacts(self.integ, self.sides, self.surface_geometry) if self.kernel else None
@@ -384,3 +453,100 @@ class TrackCosim:
         self.Fz, self.parts, self.rail_w = s["Fz"].copy(), s["parts"].copy(), s["rail_w"].copy()
         self.Fz_coupling, self._Fz_last = s["Fz_coupling"].copy(), s["Fz_last"].copy()
         self.record.truncate(s["record_len"])
+
+
+# ------------------------------------------------------------------------------- profile outputs
+def contact_tables(model: TrackModel, contact):
+    """The (crossing, plain) :class:`track.contact.TableGeometry` of ``contact`` (``geometry: profiles``)
+    for ``model`` (cached by content: the same objects a :class:`TrackCosim` of the model uses)."""
+    from .contact_geometry import scenario_tables
+    lay = model.layout
+    segs = [g for g in lay.running.get(lay.crossing_side, ()) if model.body(g.body).kind == "crossing"] \
+        if lay.crossing_side else []
+    x_range = (min(g.x0 for g in segs), max(g.x1 for g in segs)) if segs else None
+    return scenario_tables(lay, contact, x_range)
+
+
+def profile_outputs(model: TrackModel, contact, x: np.ndarray, parts: np.ndarray) -> dict:
+    """Contact point and Hertz patch per wheel and surface from recorded positions and forces.
+
+    Parameters
+    ----------
+    model : TrackModel
+    contact : track.params.ContactParams
+        With ``geometry: profiles``.
+    x : ndarray (nt, m)
+        Wheel track coordinates [m].
+    parts : ndarray (nt, m, 2)
+        Force on each surface [N] (first: rail / wing rail, second: nose).
+
+    Returns
+    -------
+    dict of ndarray (nt, m, 2): ``eta`` (lateral position on the rail section [m], outward from the
+    running edge), ``radius`` (rolling radius [m]), ``a``, ``b`` (patch semi-axes along and across
+    the track [m]), ``p0`` (peak pressure [Pa]); NaN where a surface carries no force. The
+    curvatures are looked up at the recorded x and lateral offset (bilinear), the patch is
+    :func:`track.hertz.hertz_patch` at the normal load ``F / cos(contact angle)``.
+    """
+    from .hertz import hertz_patch
+    crossing, plain = contact_tables(model, contact)
+    lay = model.layout
+    sides = wheel_sides(x.shape[1])
+    sign = np.array([1.0 if s == (lay.crossing_side or "left") else -1.0 for s in sides])
+    if contact.lateral_offset_table:
+        y = sign * np.interp(x, *contact.lateral_offset_table)
+    else:
+        y = np.broadcast_to(sign * contact.lateral_offset, x.shape)
+    out = {k: np.full(parts.shape, np.nan) for k in ("eta", "radius", "a", "b", "p0")}
+    for i, side in enumerate(sides):
+        on_x = np.array([crossing is not None and side == lay.crossing_side and
+                         model.body(lay.running_body(side, xi)).kind == "crossing" for xi in x[:, i].tolist()])
+        for geo, rows in ((crossing, on_x), (plain, ~on_x)):
+            if geo is None or not rows.any():
+                continue
+            tab = geo.table
+            xs, ys = x[rows, i], y[rows, i]
+            look = {f: tab.lookup(f, xs, ys) for f in ("eta", "radius", "A", "B", "angle")}
+            for k in range(len(tab.surfaces)):
+                F = parts[rows, i, k]
+                loaded = F > 0.0
+                with np.errstate(invalid="ignore"):
+                    patch = hertz_patch(look["A"][k], look["B"][k], np.where(loaded, F, 1.0) / np.cos(look["angle"][k]))
+                for name, v in (("eta", look["eta"][k]), ("radius", look["radius"][k]), ("a", patch.a),
+                                ("b", patch.b), ("p0", patch.p0)):
+                    out[name][rows, i, k] = np.where(loaded, v, np.nan)
+    return out
+
+
+IMPACT_WINDOW = (0.005, 0.10)   # m: the wheel centre's slope is fitted from 5 mm to 10 cm either side of the transfer
+
+
+def emergent_impact_angle(x: np.ndarray, z: np.ndarray, nose_force: np.ndarray, wing_force: np.ndarray,
+                          window: tuple = IMPACT_WINDOW) -> dict:
+    """The impact angle that emerges from one wheel's recorded vertical path through the transfer.
+
+    The transfer is the first x where the nose carries more than the wing rail; the wheel centre's
+    vertical slope ``dz/dx`` is the least-squares line through its recorded ``z(x)`` from
+    ``window[0]`` to ``window[1]`` before and after it; the impact angle is the slope after minus
+    the slope before [rad] (positive: the wheel, falling with the wing rail, is turned upwards).
+
+    Returns
+    -------
+    dict with ``x_transfer`` [m], ``slope_before``, ``slope_after``, ``angle`` [rad] (NaNs when
+    the wheel does not transfer within the record).
+    """
+    nan = dict(x_transfer=np.nan, slope_before=np.nan, slope_after=np.nan, angle=np.nan)
+    k = np.flatnonzero(nose_force > wing_force)
+    if k.size == 0 or k[0] == 0:
+        return nan
+    xt = float(x[k[0]])
+    lo, hi = window
+
+    def slope(sel):
+        if sel.sum() < 3:
+            return np.nan
+        return float(np.polyfit(x[sel], z[sel], 1)[0])
+
+    before = slope((x >= xt - hi) & (x <= xt - lo))
+    after = slope((x >= xt + lo) & (x <= xt + hi))
+    return dict(x_transfer=xt, slope_before=before, slope_after=after, angle=after - before)

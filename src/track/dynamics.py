@@ -38,7 +38,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .ballast import DAMPING_ONSET
-from .contact import HERTZ_CONSTANT, hertz
+from .contact import HERTZ_CONSTANT, hertz_pair
 from .model import PointMap, TrackModel
 from .timegrid import step_count
 
@@ -339,8 +339,8 @@ class TrackIntegrator:
             Wheel vertical positions at the end of the step [m] (up +).
         surfaces : sequence of (float, float)
             Surface heights under each wheel (:mod:`track.contact`) [m].
-        c_h : float
-            Hertz constant [N/m^1.5].
+        c_h : float or array_like, shape (m, 2)
+            Hertz constant [N/m^1.5], one for all, or per wheel and surface (profile contact).
 
         Returns
         -------
@@ -377,11 +377,12 @@ class TrackIntegrator:
         ctol = CONTACT_TOL + CONTACT_REL_TOL * fmax
         ftol = FORCE_TOL + REL_FORCE_TOL * fmax
         zw = z_wheel.tolist() if isinstance(z_wheel, np.ndarray) else [float(z) for z in z_wheel]
+        chw = np.broadcast_to(np.asarray(c_h, dtype=float), (m, 2)).tolist()
         Fc_arr = np.array(Fc)
         out = np.zeros((m, 4))
         # modified-Newton passes: they repeat only while a ballast bushing changes state
         for it in range(1, MAX_ITER + 1):
-            Fn = self._contact_newton(points, w_pred, acc_lin, G, Fc, zw, surfaces, c_h, ctol, out)
+            Fn = self._contact_newton(points, w_pred, acc_lin, G, Fc, zw, surfaces, chw, ctol, out)
             acc1 = self._corrector(acc_lin, Fn, Fc_arr, Zs)
             new_corr, change = self._ballast_change(qp, vp, acc1, corr)
             if change <= ftol:
@@ -454,14 +455,15 @@ class TrackIntegrator:
         return Zs, G, [float(p.weights @ qp[p.gidx]) for p in points]
 
     def _contact_newton(self, points: Sequence[PointMap], w_pred: list, acc_lin: np.ndarray, G: np.ndarray,
-                        Fc: list, zw: list, surfaces: Sequence[tuple], c_h: float, ctol: float,
+                        Fc: list, zw: list, surfaces: Sequence[tuple], chw: list, ctol: float,
                         out: np.ndarray) -> list:
         """Newton on ``Fc = hertz(w(Fc))`` for one pass; returns the forces [N].
 
         ``w = w_lin - G (Fn - Fc) - residual Fn`` with ``w_lin`` the deflection of the pass's
         linear solution ``acc_lin``. The wheels couple weakly through G, so each sweep updates
         every wheel with its own diagonal Jacobian (Jacobi-Newton). Per wheel, (hertz force,
-        its parts, deflection) go to ``out``.
+        its parts, deflection) go to ``out``; ``chw[i]``: the Hertz constants of wheel i's two
+        surfaces [N/m^1.5].
         """
         bh2, m = self.beta * self.h * self.h, len(points)
         Gl = G.tolist()
@@ -474,7 +476,7 @@ class TrackIntegrator:
             cpl = (G @ (np.array(Fn) - Fc_arr)).tolist()
             for i in range(m):
                 w = w_lin[i] - cpl[i] - res[i] * Fn[i]
-                F, k, F1, F2 = hertz(w, zw[i], surfaces[i], c_h)
+                F, k, F1, F2 = hertz_pair(w, zw[i], surfaces[i][0], surfaces[i][1], chw[i][0], chw[i][1])
                 step = (F - Fn[i]) / (1.0 + k * (Gl[i][i] + res[i]))
                 new = Fn[i] + step
                 if new < 0.0:

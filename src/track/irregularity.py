@@ -212,3 +212,65 @@ class WheelPolygon:
     def at(self, x) -> np.ndarray:
         """``dr`` [m] at track position ``x`` [m]: wavelength ``2 pi r0 / order`` along the track."""
         return self.radius_deviation(np.asarray(x, dtype=float) / self.radius)
+
+
+IRREGULARITY_DX = 0.005   # m, sample spacing of a generated rail irregularity (Nyquist: 1 cm wavelength)
+
+
+@dataclass(frozen=True)
+class Irregularities:
+    """The irregularities of a scenario as one vertical input per wheel (:mod:`track.cosim`).
+
+    ``r_i(x) = z_rail,side(i)(x) + dr_i(x)``: the rail irregularity under wheel i plus its radius
+    deviation, both raising the contact (``delta_k = z_k + r_i + w - z_wheel``), so the track
+    gives the wheel at ``z`` the force of the smooth geometry at ``z - r_i``.
+
+    Attributes
+    ----------
+    rails : tuple of 2 (RailIrregularity or None)
+        Left and right rail.
+    wheels : tuple
+        Per wheel a :class:`WheelFlat` / :class:`WheelPolygon` or None.
+    """
+
+    rails: tuple
+    wheels: tuple
+
+    def at(self, x: np.ndarray, sides: list) -> np.ndarray:
+        """``r_i`` [m] of every wheel at its track coordinate ``x[i]`` (sides ``left``/``right``)."""
+        out = np.zeros(len(sides))
+        for i, (xi, side) in enumerate(zip(np.asarray(x, dtype=float).tolist(), sides)):
+            rail = self.rails[0 if side == "left" else 1]
+            if rail is not None:
+                out[i] += float(rail.at(xi))
+            w = self.wheels[i] if i < len(self.wheels) else None
+            if w is not None:
+                out[i] += float(w.at(xi))
+        return out
+
+    @classmethod
+    def from_params(cls, contact, n_wheels: int, x0: float, length: float) -> "Irregularities | None":
+        """From :class:`track.params.ContactParams` (None when it has none): a measured table
+        ``(x, z_left, z_right)``, or a PSD realisation over ``[x0, x0 + length]`` (left: seed, right:
+        seed + 1, band of wavelengths ``rail_psd_band``); a flat / polygon on the leading wheelset
+        (wheels 1 and 2, the same angle)."""
+        if not contact.irregular:
+            return None
+        rails = (None, None)
+        if contact.rail_table:
+            x, zl, zr = (np.asarray(v, dtype=float) for v in contact.rail_table)
+            rails = (RailIrregularity(x, zl), RailIrregularity(x, zr))
+        elif contact.rail_psd:
+            psd = psd_function(*contact.rail_psd)
+            lam_min, lam_max = contact.rail_psd_band
+            band = dict(f_min=1.0 / lam_max, f_max=1.0 / lam_min)
+            seed = int(contact.rail_psd_seed)
+            rails = tuple(RailIrregularity.generated(psd, x0, length, IRREGULARITY_DX, seed + k, **band)
+                          for k in (0, 1))
+        wheel = None
+        if contact.wheel_flat:
+            wheel = WheelFlat(**dict(contact.wheel_flat))
+        elif contact.wheel_polygon:
+            wheel = WheelPolygon(**dict(contact.wheel_polygon))
+        wheels = tuple(wheel if i < 2 else None for i in range(n_wheels))
+        return cls(rails=rails, wheels=wheels)

@@ -54,7 +54,18 @@ except ImportError:  # pragma: no cover - numba is a dependency; the numpy path 
     numba = None
 
 from .ballast import DAMPING_ONSET
-from .contact import CrossingGeometry, DippedJoint, Flat, crossing_heights, flat_heights, hertz, joint_heights
+from .contact import (
+    CrossingGeometry,
+    DippedJoint,
+    Flat,
+    TableGeometry,
+    crossing_heights,
+    flat_heights,
+    hertz,
+    hertz_pair,
+    joint_heights,
+    table_surface,
+)
 
 KERNEL_ENV = "TURNOUT_TRACK_KERNEL"  # "numpy": the pure-numpy reference path; anything else: compiled
 PRUNE_RTOL = 1e-14  # drop |X_ij| <= this * sqrt(|X_ii X_jj|): the round-off of the reductions' products
@@ -65,6 +76,7 @@ PRUNE_RTOL = 1e-14  # drop |X_ij| <= this * sqrt(|X_ii X_jj|): the round-off of 
 OK, PASSES_FAILED, NEWTON_FAILED, NEED_ELEMENT = 0, 1, 2, 3
 # surface codes of the element tables: which geometry gives the surface heights under a wheel
 SURF_FLAT, SURF_CROSSING, SURF_JOINT, SURF_GIVEN = 0, 1, 2, 3   # GIVEN: computed by the caller
+SURF_TABLE = 4   # codes SURF_TABLE + t: contact table t (profile contact, track.contact.TableGeometry)
 # the parameter vector ``par`` of contact_step
 (P_H, P_ALPHA, P_BETA, P_GAMMA, P_SAFETY, P_FLOOR, P_CH, P_CTOL, P_CREL, P_FTOL, P_FREL, P_MAXPASS,
  P_MAXNEWTON, P_BETA_S, P_XTCP, P_XTRANSFER, P_IMPACT, P_XJOINT, P_JOINT) = range(19)
@@ -147,6 +159,8 @@ def _njit(f):
 
 
 hertz_nb = _njit(hertz)
+hertz_pair_nb = _njit(hertz_pair)
+table_surface_nb = _njit(table_surface)
 flat_heights_nb = _njit(flat_heights)
 crossing_heights_nb = _njit(crossing_heights)
 joint_heights_nb = _njit(joint_heights)
@@ -333,7 +347,7 @@ def _ballast_row(j, D, Zb, have, perm, Lp, Li, Lx, d, e, work, cnt):
 # (TrackIntegrator.step_contacts) has methods of the same names (but for the first: the
 # numpy path takes the wheels' rail points from the caller).
 @_njit
-def _locate_wheels(par, x, wside, ts, etab, ec, es, ent, W, surf):
+def _locate_wheels(par, x, yw, wside, ts, etab, ec, es, ent, W, surf, tg, tz, tc, chw):
     """Element, shape-function values and surface heights under each wheel.
 
     The element tables (:func:`element_tables`) hold, per side, the elements of the
@@ -341,8 +355,10 @@ def _locate_wheels(par, x, wside, ts, etab, ec, es, ent, W, surf):
     < ts[s+1]``) is used for ``etab[k, 0] <= x < etab[k+1, 0]``, its local coordinate is
     ``(x - etab[k, 1]) / etab[k, 2]`` clipped to [0, 1] and ``ec[k, r]`` are the cubic
     coefficients of shape function r in it. Writes the entry into ``ent[1, i]``, ``W[i]``
-    and, unless ``es[k]`` is SURF_GIVEN, ``surf[i]`` [m]; returns False when an entry
-    differs from the loaded one ``ent[0, i]``.
+    and, unless ``es[k]`` is SURF_GIVEN, ``surf[i]`` [m]; the Hertz constant of each surface
+    into ``chw[i]`` [N/m^1.5] (``par[P_CH]``, or a contact table's at ``x`` and the lateral
+    offset ``yw[i]`` for the codes ``SURF_TABLE + t``: grid ``tg[t]``, heights ``tz[t]``,
+    constants ``tc[t]``); returns False when an entry differs from the loaded one ``ent[0, i]``.
     """
     ok = True
     for i in range(x.size):
@@ -364,12 +380,17 @@ def _locate_wheels(par, x, wside, ts, etab, ec, es, ent, W, surf):
         for r in range(4):
             W[i, r] = ((ec[k, r, 3] * t + ec[k, r, 2]) * t + ec[k, r, 1]) * t + ec[k, r, 0]
         code = es[k]
+        chw[i, 0] = par[P_CH]
+        chw[i, 1] = par[P_CH]
         if code == SURF_FLAT:
             surf[i, 0], surf[i, 1] = flat_heights_nb(xw)
         elif code == SURF_CROSSING:
             surf[i, 0], surf[i, 1] = crossing_heights_nb(xw, par[P_XTCP], par[P_XTRANSFER], par[P_IMPACT])
         elif code == SURF_JOINT:
             surf[i, 0], surf[i, 1] = joint_heights_nb(xw, par[P_XJOINT], par[P_JOINT])
+        elif code >= SURF_TABLE:
+            t = code - SURF_TABLE
+            surf[i, 0], surf[i, 1], chw[i, 0], chw[i, 1] = table_surface_nb(xw, yw[i], tg[t], tz[t], tc[t])
     return ok
 
 
@@ -504,13 +525,13 @@ def _contact_coupling(a1, bh2, W, R, gd, nr, wts, E, qp, G, res, wpred):
 
 
 @_njit
-def _contact_newton(c_h, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, res, zw, surf, Fc0,
+def _contact_newton(chw, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, res, zw, surf, Fc0,
                     Fn, wlin, cpl, out, cnt):
     """Jacobi-Newton on ``Fc = hertz(w(Fc))`` for one pass (TrackIntegrator._contact_newton).
 
     ``w = wlin - G (Fc - Fc0) - res Fc`` with ``wlin`` the deflection of the pass's linear
     solution ``acc_lin``; each sweep updates every wheel with its own diagonal Jacobian.
-    Leaves the forces in ``Fn`` [N] and, per wheel, (hertz force, its parts, deflection)
+    ``chw[i]``: the Hertz constants of wheel i's surfaces [N/m^1.5]. Leaves the forces in ``Fn`` [N] and, per wheel, (hertz force, its parts, deflection)
     in ``out``; returns False when ``max_newton`` sweeps do not converge.
     """
     m = Fn.size
@@ -529,7 +550,7 @@ def _contact_newton(c_h, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, 
             cpl[i] = s
         for i in range(m):
             w = wlin[i] - cpl[i] - res[i] * Fn[i]
-            F, k, Fa, Fb = hertz_nb(w, zw[i], (surf[i, 0], surf[i, 1]), c_h)
+            F, k, Fa, Fb = hertz_pair_nb(w, zw[i], surf[i, 0], surf[i, 1], chw[i, 0], chw[i, 1])
             step = (F - Fn[i]) / (1.0 + k * (G[i, i] + res[i]))
             new = Fn[i] + step
             if new < 0.0:
@@ -659,7 +680,7 @@ def _workspace(work, n, m, nbal):
 
 
 @_njit
-def _passes(max_pass, c_h, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts, gd, nr, G, res, zw,
+def _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts, gd, nr, G, res, zw,
             surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap, qp, vp, W, Ze, corr, newc, Zb, have,
             perm, Lp, Li, Lx, dd, unit, y):
     """The modified-Newton passes of a step: contact Newton, then the ballast bushings' change;
@@ -671,7 +692,7 @@ def _passes(max_pass, c_h, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, ac
     it = 0
     while it < max_pass:
         it += 1
-        if not _contact_newton(c_h, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, res, zw, surf,
+        if not _contact_newton(chw, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, res, zw, surf,
                                Fc0, Fn, wlin, cpl, out, cnt):
             return NEWTON_FAILED, change, it
         change = _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn, Fc0, W, Ze,
@@ -690,7 +711,8 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
                  perm, Lp, Li, Lx, dd,
                  x, zw, wside, ts, etab, ec, es, ent,
                  T, gd, nr, R, Ze, E, fresh,
-                 q1, v1, acc1, F1, Fc1, out, W, surf, wts, work, iwork):
+                 q1, v1, acc1, F1, Fc1, out, W, surf, wts, work, iwork,
+                 yw, tg, tz, tc, chw):
     """One HHT-alpha step with Hertz contacts solved implicitly (TrackIntegrator.step_contacts).
 
     Parameters (m wheels, n dofs, nb ballast bushings, E table entries, nrmax the most
@@ -730,6 +752,10 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     W : float64[m, 4], surf : float64[m, 2]   shape-function values, surface heights [m]
         (written; ``surf`` read where the surface is SURF_GIVEN).
     wts : float64[m, nrmax], work, iwork : float64, int64 (:func:`work_sizes`)   workspace.
+    yw : float64[m]        lateral offset of each wheel towards its field side [m] (contact tables).
+    tg, tz, tc : float64[nt, 6], float64[nt, 2, NX, NY] (twice)
+        Contact tables (:func:`track.contact.table_surface`; codes ``SURF_TABLE + t``).
+    chw : float64[m, 2]    Hertz constant of each wheel's surfaces (written) [N/m^1.5].
 
     Returns
     -------
@@ -739,10 +765,10 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     change : float
         Last force change between passes [N].
     """
-    if not _locate_wheels(par, x, wside, ts, etab, ec, es, ent, W, surf):
+    if not _locate_wheels(par, x, yw, wside, ts, etab, ec, es, ent, W, surf, tg, tz, tc, chw):
         return NEED_ELEMENT, 0.0
     h, a_, b, g = par[P_H], par[P_ALPHA], par[P_BETA], par[P_GAMMA]
-    safety, floor, c_h, beta_s = par[P_SAFETY], par[P_FLOOR], par[P_CH], par[P_BETA_S]
+    safety, floor, beta_s = par[P_SAFETY], par[P_FLOOR], par[P_BETA_S]
     ctol0, crel, ftol0, frel = par[P_CTOL], par[P_CREL], par[P_FTOL], par[P_FREL]
     max_pass, max_newton = int(par[P_MAXPASS]), int(par[P_MAXNEWTON])
     n = q0.size
@@ -764,7 +790,7 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     ftol = ftol0 + frel * fmax
 
     # modified-Newton passes: they repeat only while a ballast bushing changes state
-    status, change, it = _passes(max_pass, c_h, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts,
+    status, change, it = _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts,
                                  gd, nr, G, res, zw, surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap,
                                  qp, vp, W, Ze, corr, newc, Zb, have, perm, Lp, Li, Lx, dd, unit, y)
     if status != OK:
@@ -782,8 +808,15 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
 _SAMPLE_XI = np.array([0.125, 0.375, 0.625, 0.875])   # interior points: each lies in its own element
 
 
-def _surface_code(geo, par: np.ndarray) -> int:
-    """Surface code of a geometry object; its parameters go into ``par``."""
+def _surface_code(geo, par: np.ndarray, tables: list) -> int:
+    """Surface code of a geometry object; its parameters go into ``par`` (a contact table into
+    ``tables``, once)."""
+    if isinstance(geo, TableGeometry):
+        for t, g in enumerate(tables):
+            if g is geo:
+                return SURF_TABLE + t
+        tables.append(geo)
+        return SURF_TABLE + len(tables) - 1
     if isinstance(geo, Flat):
         return SURF_FLAT
     if isinstance(geo, CrossingGeometry) and geo.table is None:
@@ -795,7 +828,7 @@ def _surface_code(geo, par: np.ndarray) -> int:
     return SURF_GIVEN
 
 
-def element_tables(model, geometry, par: np.ndarray):
+def element_tables(model, geometry, par: np.ndarray, tables: list | None = None):
     """Per side, the elements a wheel can run on, in increasing track coordinate (:func:`_locate_wheels`).
 
     Follows :meth:`Layout.running_body` (segments ``[x0, x1)``, the first and last extended
@@ -812,6 +845,8 @@ def element_tables(model, geometry, par: np.ndarray):
         there (:class:`Flat`, :class:`CrossingGeometry`, :class:`DippedJoint`, ...).
     par : ndarray
         contact_step's parameters; the geometries' parameters are written into it.
+    tables : list, optional
+        The contact tables (:class:`TableGeometry`) met are appended to it (code ``SURF_TABLE + t``).
 
     Returns
     -------
@@ -822,6 +857,7 @@ def element_tables(model, geometry, par: np.ndarray):
     """
     V = np.vander(_SAMPLE_XI, 4, increasing=True)
     ts, etab, ec, es, bodies, elements = [0], [], [], [], [], []
+    tables = [] if tables is None else tables
     for side in ("left", "right"):
         segs = model.layout.running[side]
         for j, seg in enumerate(segs):
@@ -833,7 +869,7 @@ def element_tables(model, geometry, par: np.ndarray):
             e0 = 0 if j == 0 else min(max(int(np.searchsorted(s, seg.x0 - o, side="right")) - 1, 0), ne - 1)
             e1 = ne - 1 if j == len(segs) - 1 else min(max(int(np.searchsorted(s, seg.x1 - o, side="left")) - 1,
                                                            0), ne - 1)
-            code = _surface_code(geometry(side, seg.body), par)
+            code = _surface_code(geometry(side, seg.body), par, tables)
             for e in range(e0, e1 + 1):
                 L = s[e + 1] - s[e]
                 Ws = np.zeros((4, 4))
@@ -851,6 +887,23 @@ def element_tables(model, geometry, par: np.ndarray):
         ts.append(len(etab))
     return (np.array(ts, np.int64), np.array(etab, float).reshape(-1, 3), np.array(ec, float).reshape(-1, 4, 4),
             np.array(es, np.int64), bodies, elements)
+
+
+def _stack_tables(tables: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The contact tables (:class:`TableGeometry`) as the kernel's ``tg`` (nt, 6) and ``tz``, ``tc``
+    (nt, 2, NX, NY), padded with NaN (never read: each table's own nx, ny bound its lookups); one
+    all-NaN dummy when there are none (fixed array types for the compiled function)."""
+    if not tables:
+        return np.zeros((1, 6)), np.full((1, 2, 2, 2), np.nan), np.full((1, 2, 2, 2), np.nan)
+    NX = max(g.z.shape[1] for g in tables)
+    NY = max(g.z.shape[2] for g in tables)
+    tg = np.array([g.grid for g in tables], float)
+    tz = np.full((len(tables), 2, NX, NY), np.nan)
+    tc = np.full((len(tables), 2, NX, NY), np.nan)
+    for t, g in enumerate(tables):
+        tz[t, :, :g.z.shape[1], :g.z.shape[2]] = g.z
+        tc[t, :, :g.c.shape[1], :g.c.shape[2]] = g.c
+    return tg, tz, tc
 
 
 # ------------------------------------------------------------------------------- driver
@@ -915,8 +968,12 @@ class CompiledContacts:
              P_MAXNEWTON, P_BETA_S]] = (integ.h, integ.alpha, integ.beta, integ.gamma, MOTION_SAFETY,
                                         MOTION_FLOOR, CONTACT_TOL, CONTACT_REL_TOL, FORCE_TOL, REL_FORCE_TOL,
                                         MAX_ITER, CONTACT_NEWTON_MAX, beta_s)
-        *self._tables, self._entry_body, self._entry_element = element_tables(model, geometry, par)
+        tables: list = []
+        *self._tables, self._entry_body, self._entry_element = element_tables(model, geometry, par, tables)
         self._given = bool((self._tables[3] == SURF_GIVEN).any())   # some heights from Python
+        self._contact_tables = _stack_tables(tables)
+        self.yw = np.zeros(m)
+        self.chw = np.zeros((m, 2))
         self.wside = np.array([("left", "right").index(s) for s in self.sides], np.int64)
         self.ent = np.full((2, m), -1, np.int64)
         nrmax = max(b.rom.nr for b in model.bodies if b.kind != "sleeper")
@@ -971,14 +1028,17 @@ class CompiledContacts:
             surf[i] = self.geometry(side, running(side, xi)).heights(xi)
 
     # ------------------------------------------------------------------ step
-    def step(self, x: np.ndarray, z_wheel: np.ndarray, c_h: float) -> np.ndarray:
-        """One step; same contract as :meth:`TrackIntegrator.step_contacts` with the wheels at x [m]."""
+    def step(self, x: np.ndarray, z_wheel: np.ndarray, c_h: float, y: np.ndarray | None = None) -> np.ndarray:
+        """One step; same contract as :meth:`TrackIntegrator.step_contacts` with the wheels at x [m]
+        (``y``: each wheel's lateral offset towards its field side [m], for contact tables)."""
         from .dynamics import ConvergenceError
 
         it = self.integ
         m, n = len(self.sides), self.model.n
         x = np.ascontiguousarray(x, dtype=float)
         zw = np.ascontiguousarray(z_wheel, dtype=float)
+        if y is not None:
+            self.yw[:] = y
         if self._given:
             self._given_surfaces(x)
         Fc0 = it.Fc if it.Fc.size == m else np.zeros(m)
@@ -996,7 +1056,8 @@ class CompiledContacts:
                 f.perm, f.Lp, f.Li, f.Lx, f.d,
                 x, zw, self.wside, ts, etab, ec, es, self.ent,
                 self.T, self.gd, self.nr, self.R, self.Ze, self.E, self.fresh,
-                new[0], new[1], new[2], new[3], Fc1, out, self.W, self.surf, self.wts, self.work, self.iwork)
+                new[0], new[1], new[2], new[3], Fc1, out, self.W, self.surf, self.wts, self.work, self.iwork,
+                self.yw, *self._contact_tables, self.chw)
             if status != NEED_ELEMENT:
                 break
             for i in np.flatnonzero(self.ent[0] != self.ent[1]).tolist():

@@ -249,6 +249,66 @@ class ReductionParams:
 
 
 @dataclass(frozen=True)
+class ContactParams:
+    """Wheel–rail contact geometry: the dip model or tables from wheel and rail profiles, and the
+    irregularities (``track.crossing.geometry``, ``track.crossing.profiles``, ``track.irregularity``,
+    ``vehicle.wheel_profile``, ``vehicle.lateral_offset``, ``vehicle.wheel_flat``, ``vehicle.wheel_polygon``).
+
+    Attributes
+    ----------
+    geometry : str
+        ``dip`` (:class:`track.contact.CrossingGeometry`, one Hertz constant) or ``profiles``
+        (contact tables of the wheel profile on the rail sections, :mod:`track.contact_geometry`).
+    wheel : tuple of (str, float)
+        :class:`track.profiles.WheelProfile` parameters (empty: new S1002).
+    wheel_table : tuple of 2 tuples, optional
+        Measured wheel profile ``(s, F)`` [m] (replaces S1002 and ``wheel``).
+    lateral_offset : float
+        Wheelset lateral offset [m], positive towards the field side of the wheel that passes the
+        crossing nose (constant along the track, unless ``lateral_offset_table``).
+    lateral_offset_table : tuple of 2 tuples
+        ``(x, y)`` [m]: the offset over the track coordinate (linear, held beyond the ends).
+    crossing : tuple of (str, value)
+        :class:`track.profiles.CrossingSections` parameters (tip_drop, full_width, wear stations...).
+    rail_psd : tuple of 2 tuples
+        One-sided PSD ``(wavenumber [1/m], G [m^3])`` of a vertical rail irregularity (empty: none).
+    rail_psd_seed : int
+        Seed of the left rail's realisation (the right rail: seed + 1).
+    rail_psd_band : tuple of 2 float
+        Wavelength band ``(shortest, longest)`` [m] the realisation is limited to.
+    rail_table : tuple of 3 tuples
+        Measured irregularity ``(x, z_left, z_right)`` [m] (replaces the PSD).
+    wheel_flat : tuple of (str, value)
+        :class:`track.irregularity.WheelFlat` parameters on the leading wheelset (empty: none).
+    wheel_polygon : tuple of (str, value)
+        :class:`track.irregularity.WheelPolygon` parameters on the leading wheelset (empty: none).
+    """
+
+    geometry: str = "dip"
+    wheel: tuple = ()
+    wheel_table: tuple | None = None
+    lateral_offset: float = 0.0
+    lateral_offset_table: tuple = ()
+    crossing: tuple = ()
+    rail_psd: tuple = ()
+    rail_psd_seed: int = 0
+    rail_psd_band: tuple = (0.01, 50.0)
+    rail_table: tuple = ()
+    wheel_flat: tuple = ()
+    wheel_polygon: tuple = ()
+
+    @property
+    def irregular(self) -> bool:
+        """Whether any irregularity (rail or wheel) is given."""
+        return bool(self.rail_psd or self.rail_table or self.wheel_flat or self.wheel_polygon)
+
+
+def _tuples(v):
+    """Lists (from JSON) -> tuples, recursively."""
+    return tuple(_tuples(x) for x in v) if isinstance(v, (list, tuple)) else v
+
+
+@dataclass(frozen=True)
 class TrackParams:
     """Everything the track model builder needs (the ``track:`` section)."""
 
@@ -260,6 +320,7 @@ class TrackParams:
     impact_angle: float = 0.006  # crossing.impact_angle [rad]
     dipped_joint: float = 0.0  # plain track only: total angle of a dipped joint mid-panel, both rails [rad]
     structural_damping: float = 0.0  # stiffness-proportional Rayleigh beta of the bodies [s]
+    contact: ContactParams = field(default_factory=ContactParams)  # contact geometry, irregularities
 
 
 def track_params_from_dict(data: dict) -> TrackParams:
@@ -293,4 +354,7 @@ def track_params_from_dict(data: dict) -> TrackParams:
         d["ballast"] = BallastParams(**bal)
     if "reduction" in d:
         d["reduction"] = ReductionParams(**d["reduction"])
+    if "contact" in d:
+        c = {k: (_tuples(v) if isinstance(v, (list, tuple)) else v) for k, v in d["contact"].items()}
+        d["contact"] = ContactParams(**c)
     return TrackParams(**d)
