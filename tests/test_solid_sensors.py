@@ -14,6 +14,7 @@ displacements (consistency checks).
 """
 from __future__ import annotations
 
+import os
 from dataclasses import replace
 
 import numpy as np
@@ -26,7 +27,7 @@ from orchestrator.inputs.sensor_layout import load_layout, resolve
 from orchestrator.inputs.track_model import track_model
 from track.sensors import Sensor, compile_sensors, displacement_row, solid_strain_row
 from track.solid.body import SolidRailParams
-from track.solid.crossing import build_solid_crossing
+from track.solid.crossing import cache_dir_from_env, solid_crossing
 from track.solid.fem import locate, probe_matrix, shape_rows
 from track.solid.section import rail_60e1_like
 
@@ -49,7 +50,7 @@ def cantilever():
     end coupling and loaded by F_TIP (up) on the coupling at x = L; the reduced static solution
     (Craig–Bampton is exact in statics for loads on retained coordinates)."""
     p = SolidRailParams(length=CANTILEVER, seats=(), h=0.06, f_modes=1.0, axial_free_end=True)
-    sc = build_solid_crossing(p)
+    sc = solid_crossing(p, cache_dir_from_env(os.environ))       # built once, then from the cache
     free = np.setdiff1d(np.arange(sc.nr), sc.end_q[0])
     f = np.zeros(sc.nr)
     f[sc.end_q[1, 0]] = F_TIP
