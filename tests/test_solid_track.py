@@ -128,10 +128,11 @@ def test_solid_strain_and_moment_match_the_beam(models):
 
     Tolerances: section moments 5 % of the peak (same stiffness distribution; the solid's
     seats are two bushings and its sections shear and warp: measured 0.9 %); the bending
-    part of the strain, (eps(+z) - eps(-z)) / 2, 5 % (measured 1-1.5 %); one gauge alone
+    part of the strain, (eps(+z) - eps(-z)) / 2, 5 % (measured 0.7-1.8 %); one gauge alone
     25 %: in the tapering nose the head lags in carrying stress (shear lag), so the solid's
-    neutral axis is not the trimmed section's centroid and each gauge also reads a
-    membrane part (measured 10-20 %) -- the local effect the 3D model is there for."""
+    neutral axis is not quite the trimmed section's centroid and each gauge also reads a
+    membrane part (measured 2-7 % with both gauge ends at one height; 10-20 % before, when
+    the ends followed the centroid up the taper) -- the local effect the 3D model is there for."""
     beam, solid = models
     b = solid.body("crossing")
     x_load = b.origin + 0.5 * (b.fom.seat_s[-1] + b.fom.seat_s[-2])
