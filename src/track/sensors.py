@@ -19,14 +19,16 @@ type              reading                                                       
                   (:func:`displacement_from_acceleration`) as the measured one
                   (a high-pass of the simulated displacement would not do: the
                   sleeper's displacement trend over a record is not in its
-                  acceleration, and differs by up to 20 % of the signal)
+                  acceleration, and differs by up to 20 % of the signal);
+                  on the solid at the accelerometer's surface point as above
 ``strain``        engineering longitudinal strain of a gauge of length          -
                   ``gauge_length`` centred at ``coord``, at height ``z`` above
                   the body's neutral axis (on the solid: the rail's,
-                  :data:`SOLID_DATUM`) (:func:`track.post.strain_row`: beams
-                  from the section rotations at the gauge ends, the solid
+                  :data:`SOLID_DATUM`): beams from the section rotations at
+                  the gauge ends (:func:`track.post.strain_row`), the solid
                   crossing rail from the axial displacements of two surface
-                  points; seed 000 eq. 1 with its typo fixed: strain = u / L;
+                  points at one height (:func:`solid_strain_row`); seed 000
+                  eq. 1 with its typo fixed: strain = u / L;
                   on the solid that is the exact mean along the gauge of the
                   tetrahedra's eps_xx, and their eps_xx at the gauge centre
                   when the gauge lies in one element)
