@@ -21,8 +21,9 @@ catalogue's causes are screened:
    locked in time, not in position, and the deflection basins differ in shape from
    sleeper to sleeper (the crossing, the longer bearers). The warp of the whole run uses
    the model for those shapes. Measured (2 % noise): +3 % speed -> first estimate
-   -0.3 %, -3 % -> +1.4 %, then within 0.2 % after one speed-corrected run; a vehicle
-   mismatch, a void, a soft pad or a worn nose move it by at most 0.15 %.
+   -0.3 %, -3 % -> +1.4 %, then within 0.08 % after one or two speed-corrected runs
+   (four truths); a vehicle mismatch, a void, a soft pad or a worn nose move the first
+   estimate by at most 0.15 %.
 2. **Sensor gains** (:func:`sensor_gains`, no runs). Each channel's least-squares gain
    ``g = <s, m> / <s, s>`` against the speed-corrected simulation. A mis-calibrated
    channel is one channel off from its peers; a track cause moves a neighbourhood.
@@ -35,11 +36,19 @@ catalogue's causes are screened:
    (:func:`orchestrator.inverse.fitting.fit_unit_cube`, as the diagnosis's cause fits)
    of the wheelset mass, the primary stiffness and damping, the pads' and the bed's
    damping, from the nominal values, in a box that is their prior (:data:`PRIORS`:
-   +-20 % for the vehicle, a factor 2 for the damping), :data:`FIT_MAX_NFEV`
-   iterations. Each value gets a 90 % interval from the Jacobian at the optimum, the
+   +-20 % for the vehicle, a factor 2 for the damping) — and, with them, the speed
+   (+-0.5 % around stage 1's) and the time shift (+-:data:`SHIFT_BOX`; a new shift needs
+   no run). Without those two the vehicle soaked up the timing: measured on a +3 %,
+   heavier, differently damped truth, a 20 us shift error is worth 40 % of J, and the
+   fit stopped with the mass 1 % and c1 8 % off, J 1.5x the truth model's; with them,
+   0.03 % and 0.2 %, J equal to the truth model's. :data:`FIT_MAX_NFEV`
+   iterations, then one Gauss-Newton step from the last Jacobian (one run, kept if it
+   lowers the residual). Each value gets a 90 % interval from that Jacobian, the
    covariance ``(J^T J)^-1 |r|^2 / (N - p)`` inflated by ``N / N_eff`` (``N_eff`` from each
    channel's lag-1 residual autocorrelation, AR(1): ``n (1 - rho) / (1 + rho)``), since
-   the residual of a model-form error is smooth and its samples are not independent.
+   the residual of a model-form error is smooth and its samples are not independent,
+   widened by the distance the linearised model still predicts to the optimum
+   (:func:`_intervals`).
    A value is *accepted* only if it is identifiable (its interval narrower than
    :data:`IDENT_SHARE` of the prior) and not pressed against the prior's edge (within
    :data:`EDGE` of it: the data want more than a vehicle known to +-20 % can differ —
@@ -83,7 +92,9 @@ PRIORS = {
     "c1": ("primary_damping", (0.8, 1.2), True),
     "rail_pad_damping": ("rail_pad_damping", (0.5, 2.0), True),  # track damping: known to a factor 2
     "ballast_damping": ("ballast_damping", (0.5, 2.0), True),
+    "speed": ("speed", (0.995, 1.005), False),   # refined around stage 1's estimate (its interval: +-0.25 %)
 }
+SHIFT_BOX = 1e-4       # s: the time shift is refined within +-0.1 ms of the alignment (a quarter sample at 2.5 kHz)
 
 
 @dataclass
@@ -328,9 +339,13 @@ class _Box:
         return np.where(self.log, np.log(v / self.lo) / np.log(self.hi / self.lo), (v - self.lo) / (self.hi - self.lo))
 
     def apply(self, raw: dict, values, names=None) -> dict:
-        """``raw`` with each parameter (default: all of :attr:`names`) at its value (through the registry)."""
+        """``raw`` with each parameter (default: all of :attr:`names`) at its value (through the registry;
+        the speed keeps at least the run's duration, :func:`_at_speed`)."""
         for name, v in zip(self.names if names is None else names, values):
-            raw = CATALOGUE[PRIORS[name][0]].apply(raw, None, [float(v)])
+            if name == "speed":
+                raw = _at_speed(raw, float(v), float(raw["simulation"]["duration"]))
+            else:
+                raw = CATALOGUE[PRIORS[name][0]].apply(raw, None, [float(v)])
         return raw
 
 
@@ -348,20 +363,31 @@ def effective_samples(cmp: Comparison) -> tuple[int, float]:
     return n_all, max(n_eff, 1.0)
 
 
-def _intervals(box: _Box, J: np.ndarray, r: np.ndarray, u: np.ndarray, cmp: Comparison) -> tuple[np.ndarray, np.ndarray]:
-    """90 % intervals in the unit cube (lo, hi) from the Jacobian ``J`` of the residuals ``r`` at ``u`` (module doc)."""
+def _gauss_newton_step(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The linearised model's step to the least-squares optimum, ``-(J^T J)^+ J^T r``."""
+    return -np.linalg.pinv(J.T @ J) @ (J.T @ r)
+
+
+def _intervals(J: np.ndarray, r: np.ndarray, u: np.ndarray, cmp: Comparison) -> tuple[np.ndarray, np.ndarray]:
+    """90 % intervals in the unit cube (lo, hi) from the Jacobian ``J`` of the residuals ``r`` at ``u`` (module doc).
+
+    The half-width is the statistical one, plus the distance to the optimum the
+    linearised model still predicts (:func:`_gauss_newton_step`): a fit stopped after a few
+    iterations on a flat valley (the vehicle's parameters trade off) is not at its optimum,
+    and the purely statistical interval would be centred on the wrong point.
+    """
     n, n_eff = effective_samples(cmp)
     p = u.size
     s2 = float(r @ r) / max(np.count_nonzero(r) - p, 1)
     cov = np.linalg.pinv(J.T @ J) * s2 * (n / n_eff)
-    half = Z90 * np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    half = Z90 * np.sqrt(np.clip(np.diag(cov), 0.0, None)) + np.abs(_gauss_newton_step(J, r))
     half = np.where(np.diag(J.T @ J) > 0, half, np.inf)   # a parameter the residuals do not feel
     return u - half, u + half
 
 
 @dataclass
 class _VehicleFit:
-    """What :func:`fit_vehicle_and_damping` returns."""
+    """What :func:`fit_vehicle_and_damping` returns (``shift``: the refined time alignment [s])."""
 
     raw: dict
     values: dict
@@ -369,6 +395,7 @@ class _VehicleFit:
     intervals: dict
     identifiable: dict
     cmp: Comparison
+    shift: float
 
 
 def _jacobian(runs, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -384,66 +411,93 @@ def _jacobian(runs, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.column_stack([(r - r0) / (q[i] - u[i]) for i, (r, q) in enumerate(zip(rs, pts))]), r0
 
 
-def fit_vehicle_and_damping(pool, target: Target, raw: dict, start: Comparison, notes: list) -> _VehicleFit:
-    """Stage 3: the vehicle's and the track damping's values in their prior box (module doc, the acceptance rule).
+class _Runs:
+    """Comparisons of unit-cube points ``[box..., shift]``: one run per box point, any shift without a run."""
 
-    Input: the pool, the target (aligned, with its gains), the speed-corrected raw
-    scenario and its comparison, a list for notes. Output: the :class:`_VehicleFit`
-    (``raw`` with the accepted values; the others at nominal).
-    """
-    from orchestrator.inverse.fitting import fit_unit_cube
+    def __init__(self, pool, target: Target, raw: dict, box: _Box):
+        self.pool, self.target, self.raw, self.box = pool, target, raw, box
+        self.s0 = float(target.shift)
+        self.sims: dict[bytes, object] = {}
+        self.cmps: dict[bytes, Comparison] = {}
 
-    box = _Box.of(raw, notes)
-    nominal = dict(zip(box.names, box.nominal))
-    if not box.names:
-        return _VehicleFit(raw, {}, nominal, {}, {}, start)
-    cache: dict[bytes, Comparison] = {}
-    u0 = np.clip(box.unit(box.nominal), 0.0, 1.0)
-    cache[u0.tobytes()] = start
+    def shift(self, u) -> float:
+        return self.s0 + (2.0 * float(u[-1]) - 1.0) * SHIFT_BOX
 
-    def comparisons(us):
-        todo = list({u.tobytes(): u for u in us if u.tobytes() not in cache}.values())
+    def comparisons(self, us: list) -> list:
+        us = [np.clip(np.asarray(u, float), 0.0, 1.0) for u in us]
+        todo = list({u[:-1].tobytes(): u[:-1] for u in us if u[:-1].tobytes() not in self.sims}.values())
         if todo:
-            for u, run in zip(todo, pool.map([box.apply(raw, box.values(u)) for u in todo])):
-                cache[u.tobytes()] = comparison(target, run)
-        return [cache[u.tobytes()] for u in us]
+            for p, run in zip(todo, self.pool.map([self.box.apply(self.raw, self.box.values(p)) for p in todo])):
+                self.sims[p.tobytes()] = run
+        for u in us:
+            if u.tobytes() not in self.cmps:
+                self.target.shift = self.shift(u)
+                self.cmps[u.tobytes()] = comparison(self.target, self.sims[u[:-1].tobytes()])
+        self.target.shift = self.s0
+        return [self.cmps[u.tobytes()] for u in us]
 
-    def runs(us):
-        return [target.weighted_residuals(c) for c in comparisons([np.clip(u, 0.0, 1.0) for u in us])]
+    def residuals(self, us: list) -> list:
+        return [self.target.weighted_residuals(c) for c in self.comparisons(us)]
 
-    fit = fit_unit_cube(runs, u0, max_nfev=FIT_MAX_NFEV)
-    u = np.clip(fit.p, 0.0, 1.0)
-    J, r = _jacobian(runs, u)
-    lo, hi = _intervals(box, J, r, u, comparisons([u])[0])
-    ident = (hi - lo) < IDENT_SHARE
-    at_edge = (u < EDGE) | (u > 1.0 - EDGE)
-    keep = ident & ~at_edge
+
+def _accepted(box: _Box, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, notes: list) -> np.ndarray:
+    """Which box parameters are accepted: identifiable and not pressed against the prior's edge (module doc)."""
+    ident = (hi - lo)[:-1] < IDENT_SHARE
+    at_edge = (u[:-1] < EDGE) | (u[:-1] > 1.0 - EDGE)
     for name, i, e in zip(box.names, ident, at_edge):
         if e:
             notes.append(f"{name}: pressed against its prior's edge: refused (a track effect, not the vehicle)")
         elif not i:
             notes.append(f"{name}: not identifiable from these channels: kept at nominal")
-    u_final = np.where(keep, u, u0)
-    cmp = comparisons([u_final])[0]
+    return ident & ~at_edge
+
+
+def fit_vehicle_and_damping(pool, target: Target, raw: dict, start: Comparison, notes: list) -> _VehicleFit:
+    """Stage 3: the vehicle's, the track damping's, the speed's and the time shift's values in their prior box.
+
+    Input: the pool, the target (aligned, with its gains), the speed-corrected raw
+    scenario and its comparison, a list for notes. Output: the :class:`_VehicleFit`
+    (``raw`` with the accepted values; the others at nominal). The target is left at
+    the refined shift.
+    """
+    from orchestrator.inverse.fitting import fit_unit_cube
+
+    box = _Box.of(raw, notes)
+    nominal = dict(zip(box.names, box.nominal))
+    rn = _Runs(pool, target, raw, box)
+    u0 = np.append(np.clip(box.unit(box.nominal), 0.0, 1.0), 0.5)
+    fit = fit_unit_cube(rn.residuals, u0, max_nfev=FIT_MAX_NFEV)
+    u = np.clip(fit.p, 0.0, 1.0)
+    J, r = _jacobian(rn.residuals, u)
+    u_gn = np.clip(u + _gauss_newton_step(J, r), 0.0, 1.0)   # one more run: the linearised optimum
+    r_gn = rn.residuals([u_gn])[0]
+    if r_gn @ r_gn < r @ r:
+        u, r = u_gn, r_gn
+    lo, hi = _intervals(J, r, u, rn.comparisons([u])[0])
+    keep = _accepted(box, u, lo, hi, notes)
+    u_final = np.append(np.where(keep, u[:-1], u0[:-1]), u[-1])
+    cmp = rn.comparisons([u_final])[0]
     if cmp.chi2 >= start.chi2:
         if keep.any():
             notes.append("vehicle/damping: the accepted values do not lower the chi-square: all kept at nominal")
         keep[:], u_final, cmp = False, u0, start
-    fitted = {n: float(v) if k else nominal[n] for n, v, k in zip(box.names, box.values(u_final), keep)}
+    target.shift = rn.shift(u_final)
+    fitted = {n: float(v) if k else nominal[n] for n, v, k in zip(box.names, box.values(u_final[:-1]), keep)}
     out = box.apply(raw, [fitted[n] for n, k in zip(box.names, keep) if k], [n for n, k in zip(box.names, keep) if k])
-    return _VehicleFit(out, fitted, nominal,
-                       {n: [float(a), float(b)] for n, a, b in zip(box.names, box.values(lo), box.values(hi))},
-                       {n: bool(k) for n, k in zip(box.names, keep)}, cmp)
+    intervals = {n: [float(a), float(b)] for n, a, b in zip(box.names, box.values(lo[:-1]), box.values(hi[:-1]))}
+    intervals["shift"] = [rn.shift([lo[-1]]), rn.shift([hi[-1]])]
+    return _VehicleFit(out, fitted, nominal, intervals, {n: bool(k) for n, k in zip(box.names, keep)}, cmp,
+                       float(target.shift))
 
 
 # ------------------------------------------------------------------------------------ all stages
-def _sensors(raw: dict, target: Target) -> list:
-    """The target's layout resolved on the raw scenario's track model."""
+def resolved_sensors(raw: dict, layout) -> list:
+    """The sensor layout resolved on the raw scenario's track model (bodies for :func:`neighbourhoods`)."""
     from orchestrator.inputs.scenario import scenario_from_dict
     from orchestrator.inputs.sensor_layout import resolve
     from orchestrator.inputs.track_model import track_model
 
-    return resolve(target.layout, track_model(scenario_from_dict(raw, source="<nuisance>").track))
+    return resolve(layout, track_model(scenario_from_dict(raw, source="<nuisance>").track))
 
 
 def fit_nuisance(pool, target: Target, raw: dict, base_cmp: Comparison) -> NuisanceFit:
@@ -470,9 +524,9 @@ def fit_nuisance(pool, target: Target, raw: dict, base_cmp: Comparison) -> Nuisa
     notes: list[str] = []
     target.gains = {}
     raw_v, speed, cmp_v, speed_interval = speed_corrected(pool, target, raw, base_cmp, notes)
-    neighbours = neighbourhoods(_sensors(raw, target))
+    neighbours = neighbourhoods(resolved_sensors(raw, target.layout))
     target.gains, _ = sensor_gains(target, cmp_v, neighbours)
-    veh = fit_vehicle_and_damping(pool, target, raw_v, target.score(cmp_v.simulated), notes)
+    veh = fit_vehicle_and_damping(pool, target, raw_v, target.score(cmp_v.simulated), notes)   # sets target.shift
     target.gains, log_gains = sensor_gains(target, veh.cmp, neighbours)   # again, with the vehicle fitted: no runs
     for k, g in target.gains.items():
         notes.append(f"channel {k}: gain {g:.3f} (ln g {log_gains[k]:+.3f}; its neighbours agree with the model)")
@@ -485,4 +539,4 @@ def fit_nuisance(pool, target: Target, raw: dict, base_cmp: Comparison) -> Nuisa
 
 
 __all__ = ["NuisanceFit", "fit_nuisance", "speed_from_data", "speed_corrected", "sensor_gains", "neighbourhoods",
-           "channel_log_gains", "fit_vehicle_and_damping", "effective_samples", "PRIORS"]
+           "channel_log_gains", "fit_vehicle_and_damping", "effective_samples", "resolved_sensors", "PRIORS"]

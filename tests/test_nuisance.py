@@ -1,0 +1,182 @@
+"""Nuisance parameters (issue 14, :mod:`orchestrator.inverse.nuisance`): the measurement and the vehicle
+differ from the scenario, and the fit says by how much without blaming (or absorbing) the track.
+
+The truths are made by a *different* model from the one fitted: another speed, another
+wheelset mass and primary stiffness, other pad and bed damping, a mis-calibrated channel
+(:func:`orchestrator.inverse.synthetic.synthesize` on a modified scenario, 2 % noise, an
+unknown trigger). The fit is given the nominal scenario and the file only.
+
+Tolerances, and why:
+
+- speed 0.3 %: the warp estimate after a speed-corrected run was within 0.08 % on four
+  truths (+-3 %, with and without a vehicle / damping mismatch); its stopping rule alone
+  allows 0.1 % (``SPEED_RTOL``);
+- a channel's gain 0.015: its least-squares gain against the simulation scatters with the
+  noise by ~0.1 % and with the model error the channel still carries (a vehicle
+  mismatch: ~1 %, measured 0.893-0.902 for a true 0.9);
+- wheelset mass 1 %, primary damping and the track's damping 5 %, k1 8 %: measured 0.03 %,
+  0.2 %, 0.3 %, 0.2 % and 3.2 % (k1 acts on the sprung mass's bounce, a few Hz, barely a
+  period in the 0.16 s record); before the speed and the time shift were refined inside the
+  fit the mass stopped 1 % short, c1 8 % (a 20 us timing error is worth 40 % of J here);
+- the 90 % intervals contain the truth for the speed, the mass, c1 and both dampings
+  (measured; k1's missed it by 0.5 %: not asserted);
+- residual: J after the fit within 1.1x the truth model's own J on the same record (the
+  noise level of this measurement; measured 1.00x).
+"""
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from orchestrator.inputs.scenario import bundled_scenario, load_scenario, scenario_from_dict
+from orchestrator.inputs.sensor_layout import layout_of
+from orchestrator.inverse.objective import Target
+from orchestrator.inverse.screening import Pool, comparison
+from orchestrator.inverse.synthetic import Effect, synthesize
+
+SCENARIO = bundled_scenario("measurement/crossing_quarter_120.yaml")
+NOISE = 0.02
+SPEED_RTOL = 0.003
+GAIN_ATOL = 0.015
+MASS_RTOL = 0.01
+DAMPING_RTOL = 0.05
+K1_RTOL = 0.08
+J_TRUTH_FACTOR = 1.1
+
+
+@pytest.fixture(scope="module")
+def sc():
+    return load_scenario(SCENARIO)
+
+
+@pytest.fixture(scope="module")
+def pool():
+    from orchestrator.sweeps.executors import make_executor
+
+    ex = make_executor(2, None)
+    yield Pool(ex, str(SCENARIO))
+    ex.shutdown(wait=True, cancel_futures=True)
+
+
+def _truth(sc, tmp_path, name, *, speed=1.0, start_values=None, pad_damping=1.0, bed_damping=1.0,
+           effect=Effect("none"), crop=0.01, seed=7):
+    """A measurement file of a model that differs from ``sc`` as given; returns (path, truth raw)."""
+    raw = copy.deepcopy(sc.raw)
+    raw["vehicle"]["speed"] *= speed          # same duration: a faster passage covers more track
+    raw["vehicle"]["start_values"] = dict(start_values or {})
+    raw["track"]["rail_pad"]["damping"] *= pad_damping
+    raw["track"]["ballast"]["damping_per_length"] *= bed_damping
+    truth = scenario_from_dict(raw, source=str(SCENARIO), base_dir=SCENARIO.parent)
+    path = tmp_path / f"{name}.csv"
+    synthesize(truth, effect, path, noise=NOISE, seed=seed, crop=crop)
+    return path, effect.apply(raw)
+
+
+def _target(sc, path, pool, gains=None):
+    """The measurement (channels scaled by ``gains``: a mis-calibrated chain), aligned on the nominal run."""
+    target = Target.read(path, layout_of(sc))
+    for k, g in (gains or {}).items():
+        target.measured.channels[k] = g * target.measured.channels[k]
+    run = pool.map([sc.raw])[0]
+    target.align_to(run.t, run.signals)
+    return target, comparison(target, run)
+
+
+def test_speed_from_a_faster_passage_and_the_record_covered(sc, pool, tmp_path):
+    """+3 % speed, recorded to the end of the truth run (no crop): the passage that crashed the
+    diagnosis (its aligned record reached past the nominal run's end, so the screened signals
+    held NaN there). The speed comes back within 0.3 %, inside its interval, and the
+    speed-corrected run covers the whole record."""
+    from orchestrator.inverse.nuisance import speed_corrected
+
+    path, truth = _truth(sc, tmp_path, "fast", speed=1.03, crop=0.0)
+    target, base = _target(sc, path, pool)
+    assert any(not np.isfinite(v).all() for v in base.simulated.values())   # the nominal run does not cover it
+    notes = []
+    raw_v, v, cmp, interval = speed_corrected(pool, target, sc.raw, base, notes)
+    v_true = truth["vehicle"]["speed"]
+    print(f"\nspeed {v:.4f} (truth {v_true:.4f}), 90 % interval {interval}, notes {notes}")
+    assert v == pytest.approx(v_true, rel=SPEED_RTOL)
+    assert interval[0] <= v_true <= interval[1]
+    assert raw_v["vehicle"]["speed"] == v
+    assert all(np.isfinite(s).all() for s in cmp.simulated.values())
+    assert cmp.objective < 0.5 * base.objective
+
+
+def test_a_miscalibrated_channel_is_found_and_track_causes_are_not_turned_into_gains(sc, pool, tmp_path):
+    """One channel at gain 0.9 is one channel off from its peers: found. A soft pad under one
+    sleeper and a void move a neighbourhood of channels together: no gain at all."""
+    from orchestrator.inverse.nuisance import neighbourhoods, resolved_sensors, sensor_gains
+
+    neighbours = neighbourhoods(resolved_sensors(sc.raw, layout_of(sc)))
+    path, _ = _truth(sc, tmp_path, "nominal")
+    target, base = _target(sc, path, pool, gains={"B3": 0.9})
+    gains, log_gains = sensor_gains(target, base, neighbours)
+    print(f"\ngain fault: {gains}")
+    assert set(gains) == {"B3"} and gains["B3"] == pytest.approx(0.9, abs=GAIN_ATOL)
+    for name, effect in (("pad", Effect("rail_pad_stiffness", 21, {"stiffness_scale": 0.2})),
+                         ("void", Effect("ballast_void", 21, {"gaps": [0.0, 0.3e-3, 0.7e-3, 1.1e-3, 1.5e-3, 1.8e-3]}))):
+        path, _ = _truth(sc, tmp_path, name, effect=effect)
+        target, base = _target(sc, path, pool)
+        gains, log_gains = sensor_gains(target, base, neighbours)
+        print(f"{name}: gains {gains}; ln g B3 {log_gains['B3']:+.3f} C3 {log_gains['C3']:+.3f}")
+        assert gains == {}, name
+
+
+def test_vehicle_damping_speed_and_a_channel_recovered_from_a_different_model(sc, pool, tmp_path):
+    """Truth: +3 % speed, wheelset 1750 kg (nominal 1500), k1 1.0e6 (1.2e6), c1 as nominal, pads'
+    damping x1.5, bed's x0.7, channel B3 at gain 0.9. The fit recovers each of them and the
+    residual falls to the truth model's own level."""
+    from orchestrator.inverse.nuisance import fit_nuisance
+
+    path, truth = _truth(sc, tmp_path, "mismatch", speed=1.03, start_values={"wheelset_mass": 1750.0, "k1": 1.0e6},
+                         pad_damping=1.5, bed_damping=0.7)
+    target, base = _target(sc, path, pool, gains={"B3": 0.9})
+    fit = fit_nuisance(pool, target, sc.raw, base)
+    j = fit.to_json()
+    ref = Target.read(path, layout_of(sc))       # the truth model against the same record: the noise level
+    ref.measured.channels["B3"] = 0.9 * ref.measured.channels["B3"]
+    ref.gains = {"B3": 0.9}
+    run = pool.map([truth])[0]
+    ref.align_to(run.t, run.signals)
+    j_truth = comparison(ref, run).objective
+    print(f"\nJ {base.objective:.4f} -> {fit.cmp.objective:.4f} (truth model {j_truth:.4f}); {fit.runs} runs")
+    print({k: (v, j["intervals"].get(k)) for k, v in j["values"].items()})
+    print(j["identifiable"], j["channel_gains"], j["notes"])
+    expected = {"speed": (truth["vehicle"]["speed"], SPEED_RTOL), "wheelset_mass": (1750.0, MASS_RTOL),
+                "k1": (1.0e6, K1_RTOL), "c1": (2.0e4, DAMPING_RTOL), "rail_pad_damping": (3.0e4, DAMPING_RTOL),
+                "ballast_damping": (2.1e4, DAMPING_RTOL)}
+    for name, (value, rtol) in expected.items():
+        assert fit.identifiable[name], name
+        assert fit.values[name] == pytest.approx(value, rel=rtol), name
+        if name != "k1":
+            lo, hi = fit.intervals[name]
+            assert lo <= value <= hi, (name, value, fit.intervals[name])
+    assert set(fit.channel_gains) == {"B3"} and fit.channel_gains["B3"] == pytest.approx(0.9, abs=GAIN_ATOL)
+    assert fit.cmp.objective <= J_TRUTH_FACTOR * j_truth
+    assert fit.raw["vehicle"]["start_values"]["wheelset_mass"] == fit.values["wheelset_mass"]
+    assert target.gains == fit.channel_gains and target.shift == fit.shift
+    assert math.isfinite(j["objective"])
+
+
+@pytest.mark.parametrize("name, effect", [
+    ("worn_nose", Effect("impact_angle", None, {"impact_angle": 0.015})),
+    pytest.param("void", Effect("ballast_void", 21, {"gaps": [0.0, 0.4e-3, 0.8e-3, 1.2e-3, 1.6e-3, 2.0e-3]}),
+                 marks=pytest.mark.slow),
+])
+def test_a_track_effect_is_not_absorbed(sc, pool, tmp_path, name, effect):
+    """A worn nose (15 mrad, nominal 6) or a void with the nominal vehicle: the nuisance fit leaves
+    the misfit to the track causes (measured: J 0.4277 -> 0.4260 for the nose, the wheelset
+    mass moved +4.4 % inside its prior; the void: no change), and turns no channel into a gain."""
+    from orchestrator.inverse.nuisance import fit_nuisance
+
+    path, _ = _truth(sc, tmp_path, name, effect=effect)
+    target, base = _target(sc, path, pool)
+    fit = fit_nuisance(pool, target, sc.raw, base)
+    print(f"\n{name}: J {base.objective:.4f} -> {fit.cmp.objective:.4f}; {fit.to_json()['values']}; {fit.notes}")
+    assert fit.cmp.objective >= 0.97 * base.objective        # at most 3 % of the misfit absorbed
+    assert fit.channel_gains == {}
+    assert fit.values["speed"] == pytest.approx(sc.vehicle.speed, rel=SPEED_RTOL)
