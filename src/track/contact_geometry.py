@@ -87,8 +87,10 @@ class ContactTable:
         fx, ix = _cell(self.x, x)
         fy, iy = _cell(self.y, y)
         v = self.data[field]
-        out = ((1 - fx) * (1 - fy) * v[:, ix, iy] + fx * (1 - fy) * v[:, ix + 1, iy]
-               + (1 - fx) * fy * v[:, ix, iy + 1] + fx * fy * v[:, ix + 1, iy + 1])
+        jx = np.minimum(ix + 1, self.x.size - 1)     # a grid of one point: the same node (weight 0)
+        jy = np.minimum(iy + 1, self.y.size - 1)
+        out = ((1 - fx) * (1 - fy) * v[:, ix, iy] + fx * (1 - fy) * v[:, jx, iy]
+               + (1 - fx) * fy * v[:, ix, jy] + fx * fy * v[:, jx, jy])
         if field == "z":
             out = np.where(np.isnan(out), -np.inf, out)
         return out
@@ -115,20 +117,26 @@ def _wheel_samples(wheel, s: np.ndarray) -> dict:
                 curv=np.where(bad, 0.0, curv))
 
 
-def _refine(d: np.ndarray, i: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+SMOOTH_RADIUS = 1e-3   # m: a gap function curved tighter than this radius at its maximum is a corner, not refined
+
+
+def _refine(d: np.ndarray, i: np.ndarray, d_eta: float = D_ETA) -> tuple[np.ndarray, np.ndarray]:
     """Parabolic refinement of the maximum of ``d`` (..., n) at index ``i``: (offset in samples in
-    [-0.5, 0.5], refined maximum). Where a neighbour is missing (edge, -inf) no refinement."""
+    [-0.5, 0.5], refined maximum). Where a neighbour is missing (edge, -inf) no refinement; nor
+    where the maximum is a corner (a cut edge of the nose beside a cliff): the second difference
+    exceeds ``d_eta^2 / SMOOTH_RADIUS`` (profile radii are >= 13 mm on the rail and a few mm on
+    the wheel), where the parabola through a cliff would overshoot by up to 1/8 of its height."""
     n = d.shape[-1]
     with np.errstate(invalid="ignore"):
-        return _refine_finite(d, i, n)
+        return _refine_finite(d, i, n, d_eta * d_eta / SMOOTH_RADIUS)
 
 
-def _refine_finite(d, i, n):
+def _refine_finite(d, i, n, max_bend):
     il, ir = np.clip(i - 1, 0, n - 1), np.clip(i + 1, 0, n - 1)
     take = lambda k: np.take_along_axis(d, k[..., None], axis=-1)[..., 0]   # noqa: E731
     d0, dl, dr = take(i), take(il), take(ir)
     den = dl - 2.0 * d0 + dr
-    ok = (i > 0) & (i < n - 1) & np.isfinite(dl) & np.isfinite(dr) & (den < 0.0)
+    ok = (i > 0) & (i < n - 1) & np.isfinite(dl) & np.isfinite(dr) & (den < 0.0) & (den >= -max_bend)
     p = np.where(ok, 0.5 * (dl - dr) / np.where(ok, den, -1.0), 0.0)
     p = np.clip(p, -0.5, 0.5)
     return p, np.where(ok, d0 - 0.25 * (dl - dr) * p, d0)
@@ -149,7 +157,7 @@ def _surface_contacts(rail_fn, wheel, x: np.ndarray, y: np.ndarray, eta_tl: floa
         b = min(nx, a + step)
         d = zr[a:b, None, :] - ws["z"][None, :, :]             # (bx, ny, neta)
         i = np.argmax(d, axis=-1)
-        p, dmax = _refine(d, i)
+        p, dmax = _refine(d, i, d_eta)
         iy = np.broadcast_to(np.arange(ny)[None, :], i.shape)
         hit = np.isfinite(dmax)
         out["dz"][a:b] = np.where(hit, dmax, -np.inf)

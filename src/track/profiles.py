@@ -457,8 +457,11 @@ class CrossingSections:
         The nose of width ``w`` is the rail head with its gauge corner on ``L_t`` (``eta = 0``) cut
         by the mirrored head with its gauge corner on ``L_d`` (``eta = w``): the lower of the two
         where both exist. A narrow nose is thus a ridge of the heads' corner and shoulder arcs,
-        lower than the crown (4.6 mm at the 12 mm tip, 60E1), and from ``w = 2 x head width`` on
-        the two heads are the V legs. Then the design drop and the wear are subtracted.
+        lower than the crown (4.6 mm at the 12 mm tip, 60E1). From ``w = head width`` on the nose is
+        the two rails side by side, each cut along the nose's centre line ``eta = w / 2`` (taking
+        the lower head there would open a cliff of the second head's field-side flank in the middle
+        of the nose; at ``w = head width`` both rules give the crown, to the rails' 1:40 cant).
+        Then the design drop and the wear are subtracted.
         """
         x, eta = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(eta, dtype=float))
         w = self.nose_width(x)
@@ -466,7 +469,8 @@ class CrossingSections:
         z1, k1 = self.head.height_and_curvature(eta - hw)
         z2, k2 = self.head.height_and_curvature(w - eta - hw)
         both = np.isfinite(z1) & np.isfinite(z2)
-        use2 = np.where(both, z2 < z1, np.isfinite(z2))
+        split = w >= self.head.width              # two rails side by side, cut along the nose's centre line
+        use2 = np.where(both, np.where(split, eta >= 0.5 * w, z2 < z1), np.isfinite(z2))
         z = np.where(use2, z2, z1)
         k = np.where(use2, k2, k1)
         on = (w > 0.0) & (eta >= 0.0) & (eta <= w) & np.isfinite(z)
