@@ -208,3 +208,19 @@ def profile_contact(contact, model: TrackModel, res) -> tuple[dict, dict]:
                                                            "tip_impact": kin["tip_impact"]}}
         summary[f"wheel{i + 1}"] = w
     return arrays, summary
+
+
+def profile_scalars(contact, model: TrackModel, res) -> dict:
+    """Scalars of a profile-contact run for studies: for the first wheel at the nose, the emergent and
+    kinematic impact angles [rad], the transfer position behind the theoretical crossing point [m],
+    the peak nose force [N] and peak pressure [Pa] (:func:`profile_contact`); empty without a nose."""
+    _, summary = profile_contact(contact, model, res)
+    for w in summary.values():
+        if "transfer" in w:
+            em, kin = w["transfer"]["emergent"], w["transfer"]["kinematic"]
+            nose = w.get("nose", {})
+            return {"impact_angle_emergent": float(em["angle"]), "impact_angle_kinematic": float(kin["angle"]),
+                    "transfer_behind_tcp": float(em["x_transfer"] - model.layout.x_tcp),
+                    "max_Fz_nose_wheel": float(nose.get("max_force", 0.0)),
+                    "max_p0_nose": float(nose.get("max_p0", np.nan))}
+    return {}

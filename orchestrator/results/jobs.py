@@ -99,6 +99,8 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     if meta is not None:
         _plot_track_results(out_dir, scenario, an)
     _plot_signals(out_dir, scenario, model.layout, res)
+    if geometry is not None and model.layout.x_tcp is not None:
+        _plot_contact_path(out_dir, model.layout, res, geometry)
     t_end = time.perf_counter()
     summary["wall_seconds"]["job_total"] = t_end - t_start
     summary["counters"] = _counters(res, t_write - t_post, t_end - t_write)
@@ -180,6 +182,14 @@ def _plot_track_results(out_dir: Path, scenario, an) -> None:
                                      rail_name, f"{sl_name} (crossing transition)",
                                      marks_rail=[a["x_transition"][0]],
                                      marks_sleeper=list(a["wheel_y"])), out_dir / "moments.png")
+
+
+def _plot_contact_path(out_dir: Path, lay, res, geometry: dict) -> None:
+    """contact_path.png: the first wheel at the nose, its contact path and vertical trajectory."""
+    i = ["left", "right"].index(lay.crossing_side)      # wheels alternate left, right from the front
+    fig = plots.plot_contact_path(res.x[:, i], geometry["eta"][:, i], res.z[:, i], res.parts[:, i], lay.x_tcp,
+                                  f"wheel {i + 1}")
+    plots.save(fig, out_dir / "contact_path.png")
 
 
 def _plot_signals(out_dir: Path, scenario, lay, res) -> None:

@@ -137,6 +137,37 @@ def plot_frf(f, H_by_label: dict, title: str):
     return fig
 
 
+def plot_contact_path(x, eta, z, parts, x_tcp: float, label: str):
+    """The contact point's path on the wing rail and the nose seen from above (lateral position on the
+    rail section against x - x_tcp, one colour per surface, only where it carries force) and the
+    wheel's vertical trajectory, for one wheel through the crossing (profile contact).
+
+    Parameters
+    ----------
+    x : ndarray (nt,)     wheel track coordinate [m].
+    eta : ndarray (nt, 2) lateral contact position on wing rail / nose [m] (NaN unloaded).
+    z : ndarray (nt,)     wheel vertical position [m].
+    parts : ndarray (nt, 2) force on wing rail / nose [N].
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    d = x - x_tcp
+    sel = (d > -0.5) & (d < 1.5)
+    for k, name in enumerate(("wing rail", "nose")):
+        on = sel & (parts[:, k] > 0)
+        ax[0].plot(d[on], 1e3 * eta[on, k], ".", ms=2, label=name)
+    ax[0].set_ylabel("contact position on the rail,\nfrom the running edge [mm]")
+    ax[0].set_title(f"{label}: contact path through the crossing (top view) and wheel trajectory")
+    ax[0].legend(fontsize=8)
+    ax[1].plot(d[sel], 1e3 * z[sel], lw=1)
+    ax[1].set_ylabel("wheel z [mm]")
+    ax[1].set_xlabel("x - x_tcp [m]")
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
 def save(fig, path) -> None:
     """Write a figure and release it."""
     import matplotlib.pyplot as plt

@@ -22,7 +22,7 @@ import numpy as np
 from orchestrator.cosim.master import run_cosim
 from orchestrator.cosim.passage import END_MARGIN_SLEEPERS, start_position
 from orchestrator.inputs.track_model import track_model
-from orchestrator.results.analysis import analyse
+from orchestrator.results.analysis import analyse, profile_scalars
 from track.layout import build_layout
 
 AFTER_TRANSITION = 3.0  # m: a study run ends when the front wheelset is this far behind the transfer
@@ -57,5 +57,7 @@ def run_case(scenario, run_dir: Path) -> dict[str, float]:
     run_dir.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(run_dir / "arrays.npz", t=res.t, Fz=res.Fz, x=res.x, **an.arrays)
     out = {k: float(v) for k, v in an.scalars.items()}
+    if scenario.track.contact.geometry == "profiles":      # emergent impact angle, transfer position (issue 15)
+        out.update(profile_scalars(scenario.track.contact, model, res))
     out["duration_used"] = float(scenario.simulation.duration)
     return out
