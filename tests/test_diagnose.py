@@ -72,9 +72,9 @@ def _field_passage(tmp_path, name: str) -> tuple[dict, object]:
     ``null_fast``: no track effect; the vehicle's wheelset mass, k1, c1 drawn within +-20 %, damping and
     a finer step drawn, and the passage 3 % faster than the scenario over the nominal 0.16 s — so the record
     reaches 2.6 ms past the end of the nominal run (the case that once ended in the PCHIP traceback).
-    ``void``: a void on an instrumented sleeper (a shape that is not a wedge, off the screening grid) seen
-    through a drawn vehicle / speed (+-4 %) / damping / step mismatch. ``two``: a worn nose and a void, with a
-    mild mismatch (wheelset mass +10 %, speed +1 %, ballast damping x1.2, half the step).
+    ``void_mild``: a void on an instrumented sleeper (a shape that is not a wedge, off the screening grid);
+    ``two``: a worn nose and a void; both through a mild mismatch (wheelset mass +5 %, half the time step:
+    the discretisation error does not cancel).
     Returns (the hidden case, for the test only; the measured file's path).
     """
     import copy
@@ -92,10 +92,9 @@ def _field_passage(tmp_path, name: str) -> tuple[dict, object]:
         case = draw_case(1, "null_vehicle")
         case = replace(case, mismatch=replace(case.mismatch, speed=1.03))
         return synthesize_case(long, case, out, crop=0.0)["case"], out
-    if name == "void":
-        return synthesize_case(sc, draw_case(1, "void_sensor+mismatch"), out)["case"], out
-    case = replace(draw_case(1, "two_nose_void"), mismatch=Mismatch({"wheelset_mass": 1.1}, 1.01, 1.2, 1.0, 2))
-    return synthesize_case(sc, case, out)["case"], out
+    mild = Mismatch({"wheelset_mass": 1.05}, 1.0, 1.0, 1.0, 2)
+    family = "void_sensor" if name == "void_mild" else "two_nose_void"
+    return synthesize_case(sc, replace(draw_case(1, family), mismatch=mild), out)["case"], out
 
 
 def test_faster_passage_with_vehicle_mismatch_is_never_a_track_cause(tmp_path):
@@ -114,12 +113,71 @@ def test_faster_passage_with_vehicle_mismatch_is_never_a_track_cause(tmp_path):
     from orchestrator.inputs.measured import read_measured
 
     measured = read_measured(passage, layout_of(load_scenario(SCENARIO)).types)
-    assert result["baseline"]["n"] < measured.t.size * len(measured.channels)   # samples outside were masked
+    assert result["baseline"]["n"] < measured.t.size * len(measured.channels)   # samples outside were masked ...
+    assert any(d["stage"] == "baseline" and "outside the simulated window" in d["reason"]
+               for d in result["dropped"]), result["dropped"]                   # ... and the answer says so
     if a["kind"] == "unexplained":
         w = a["where"]
         assert w["channels"] and measured.t[0] <= w["time_window"][0] < w["time_window"][1] <= measured.t[-1], w
         assert 0 <= w["band_hz"][0] < w["band_hz"][1], w
     assert (tmp_path / "out" / "report.md").read_text(encoding="utf-8").startswith("# Diagnosis")
+
+
+def _named_right(named: dict, effect: dict) -> bool:
+    """A named cause is the hidden effect: same cause, and for a local one the sleeper in an ambiguity set of <= 2."""
+    if named["cause"] != effect["cause"]:
+        return False
+    if effect["sleeper"] is None:
+        return "sleeper" not in named
+    amb = named["ambiguity"]["sleepers"]
+    return effect["sleeper"] in amb and len(amb) <= 2
+
+
+def _check_uncertainty(named: dict) -> None:
+    """A named cause's intervals: one per parameter entry, ordered, inside the cause's bounds and around the
+    fitted value (the interval is centred on it in the unit cube, then clipped); unidentified entries come
+    with the sensor that would pin them."""
+    from orchestrator.inputs.causes import CATALOGUE
+
+    kind = CATALOGUE[named["cause"]]
+    u = named["uncertainty"]
+    values = kind.values_of(named["parameters"])
+    assert len(u["intervals"]) == len(values) == len(u["identifiable"])
+    for v, (lo, hi), lb, ub in zip(values, u["intervals"], kind.lower, kind.upper):
+        assert lb - 1e-12 <= lo <= v * (1 + 1e-9) + 1e-12 and v * (1 - 1e-9) - 1e-12 <= hi <= ub + 1e-12, (v, lo, hi)
+    assert len(u["pin_with"]) >= (not all(u["identifiable"])), u
+
+
+def test_void_through_another_model_is_named_with_its_sleeper(tmp_path):
+    """One void on an instrumented sleeper (a non-wedge shape, off the screening grid) seen through another
+    model (wheelset mass +5 %, half the time step) and the field chain:
+    ``named``, first cause the void with its sleeper (exact or an ambiguity set of <= 2), a gain of at least
+    50 % (issue 14's floor with model-form mismatch), intervals for its six gaps."""
+    case, passage = _field_passage(tmp_path, "void_mild")
+    result = diagnose(SCENARIO, passage, tmp_path / "out", progress=False).to_json()
+    a = result["answer"]
+    print(f"\nvoid: truth {case['effects']}; answer {a['kind']}: {a['reason']}; {result['runs']} runs, "
+          f"{result['wall_seconds']:.0f} s")
+    assert a["kind"] == "named" and _named_right(a["causes"][0], case["effects"][0]), a
+    assert result["named_cause"] == a["causes"][0]
+    assert result["gain"]["total"] >= 0.5, result["gain"]
+    _check_uncertainty(a["causes"][0])
+
+
+def test_worn_nose_and_void_are_both_named(tmp_path):
+    """Two effects at once (a worn nose and a void), through a mildly different model: forward selection
+    names both, each with a positive gain of its own over the model before it."""
+    case, passage = _field_passage(tmp_path, "two")
+    result = diagnose(SCENARIO, passage, tmp_path / "out", progress=False).to_json()
+    a = result["answer"]
+    print(f"\ntwo: truth {case['effects']}; answer {a['kind']}: {a['reason']}; {result['runs']} runs, "
+          f"{result['wall_seconds']:.0f} s")
+    assert a["kind"] == "named" and len(a["causes"]) == 2, a
+    for effect in case["effects"]:
+        assert any(_named_right(c, effect) for c in a["causes"]), (effect, a["causes"])
+    assert all(c["gain"] > 0 for c in a["causes"])
+    for c in a["causes"]:
+        _check_uncertainty(c)
 
 
 @pytest.mark.slow
@@ -367,7 +425,8 @@ def test_interval_of_a_linear_fit_is_the_textbook_one():
     textbook = res[0] / (x.size - 2) * np.linalg.inv(X.T @ X)
     assert unit_covariance(X, r, x.size) == pytest.approx(textbook, rel=1e-9)
     assert unit_covariance(X, r, x.size / 4) == pytest.approx(4 * textbook, rel=1e-9)
-    assert np.isinf(unit_covariance(np.column_stack([x, 0 * x]), r, x.size)[1, 1])
+    blind = unit_covariance(np.column_stack([x, 0 * x]), r, x.size)
+    assert np.isinf(blind[1, 1]) and blind[0, 0] == pytest.approx(res[0] / (x.size - 2) / (x @ x), rel=1e-9)
 
 
 def test_dense_search_skips_samples_outside_the_simulated_window():

@@ -23,7 +23,8 @@ module that applies it):
    holds with any sensor group held out. Candidates within ΔBIC 10 of it on the
    effective sample size cannot be told apart from it: its ambiguity set.
 5. **Round 2, forward selection** (:func:`_second_round`): with a cause named, the
-   :data:`SECOND_ROUND` next-best candidates of round 1 are screened on top of the
+   :data:`SECOND_ROUND` candidates whose round-1 screening signals, added as a change to
+   the extended model's, fit best (no runs) are screened for real on top of the
    extended model and the :data:`SECOND_CONFIRM` best of them fitted, and a second
    cause is named by the same rule relative to it (at most :data:`MAX_CAUSES`), each
    with its own gain.
@@ -69,7 +70,7 @@ from orchestrator.inverse.diagnosis import Answer, Baseline, CauseFit, Diagnosis
 from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
-from orchestrator.inverse.selection import CONFIRM, FIT, Round, select
+from orchestrator.inverse.selection import CONFIRM, FIT, Round, select, superposed_ranking
 from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, MIN_SHARE, NONE_MARGIN, Evidence, assess,
                                                at_noise_level, locate)
 
@@ -204,6 +205,11 @@ def _baseline(pool: Pool, inp: _Inputs) -> tuple[Evaluated, Baseline]:
     cmp, why = checked_comparison(inp.target, base_run)
     if cmp is None:
         raise UserInputError(f"{inp.measured_path}: cannot be compared with the nominal run: {why}")
+    outside = sum(int((~np.isfinite(y)).sum()) for y in cmp.simulated.values())
+    if outside:
+        total = sum(y.size for y in cmp.simulated.values())
+        pool.drop("samples of the record", "baseline", f"{outside} of {total} channel samples lie outside the "
+                  f"simulated window: masked in every comparison")
     base = Evaluated(Candidate("none"), np.zeros(0), cmp, 0, "nominal")
     text = json.dumps({**base.cmp.summary(), "bic": base.bic(), "where": _where(base.cmp, inp.sensors),
                        "noise_sigma": inp.target.sigma}, indent=1, default=numpy_default)
@@ -276,18 +282,19 @@ def _rounds(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated) -> tuple[list[_
         named.append(_Named(pick, ev, rd, raw))
         if len(named) >= MAX_CAUSES:
             break
-        nxt = _second_round(rounds[0], named)
+        nxt = _second_round(inp.target, rounds[0], named)
         if not nxt:
             break
         rounds.append(select(pool, inp.target, raw, pick, sum(n.e.k for n in named), nxt, SECOND_CONFIRM))
     return named, rounds, evidence
 
 
-def _second_round(first: Round, named: list[_Named]) -> list[Candidate]:
-    """Step 5: the :data:`SECOND_ROUND` next-best candidates of round 1, none on a named cause's site."""
+def _second_round(target: Target, first: Round, named: list[_Named]) -> list[Candidate]:
+    """Step 5: the :data:`SECOND_ROUND` candidates whose round-1 screening, superposed on the extended model,
+    fits best (:func:`orchestrator.inverse.selection.superposed_ranking`; no runs), none on a named cause's site."""
     taken = [n.e.candidate for n in named]
-    out = [e.candidate for e in first.ranked if not any(_same_site(e.candidate, t) for t in taken)]
-    return out[:SECOND_ROUND]
+    free = [c for c in first.screened if not any(_same_site(c, t) for t in taken)]
+    return superposed_ranking(target, first, named[-1].e, free)[:SECOND_ROUND]
 
 
 def _entry(e: Evaluated, rd: Round, rnd: int, ev: Evidence | None) -> CauseFit:

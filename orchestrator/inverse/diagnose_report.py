@@ -143,6 +143,7 @@ def _nuisance_lines(result: Diagnosis) -> list[str]:
                      f"{ident.get(k, '')} |")
     if nz.get("channel_gains"):
         lines += ["", "Sensor gains: " + _fmt(nz["channel_gains"]) + "."]
+    lines += [""] + [f"- {n}" for n in nz.get("notes", [])]
     return lines + [""]
 
 

@@ -154,6 +154,8 @@ class Round:
         Candidate of ``real`` -> labels of the others within DELTA_BIC of it.
     fitters : dict
         Candidate -> its :class:`CauseFitter` (its runs, for the intervals).
+    screened : dict
+        Candidate -> magnitude -> signals on the measured base (:func:`_screen`).
     """
 
     reference: Evaluated
@@ -163,6 +165,7 @@ class Round:
     bic: dict
     twins: dict
     fitters: dict
+    screened: dict = field(default_factory=dict)
 
 
 def _screen(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, axes: dict) -> dict:
@@ -252,11 +255,35 @@ def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, ca
     """
     axes = {c: scalar_axis(kind_of(c), raw, c.sleeper) for c in cands}
     pool.expect(sum(len(axes[c][0]) - 1 for c in cands))
-    dense = _search(target, cands, _screen(pool, target, raw, ref, cands, axes))
+    screened = _screen(pool, target, raw, ref, cands, axes)
+    dense = _search(target, cands, screened)
     confirmed = _confirm(pool, target, raw, ref, dense, confirm)
     fitted, fitters = _fits(pool, target, raw, ref, confirmed)
-    return _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)
+    rd = _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)
+    rd.screened = screened
+    return rd
 
 
-__all__ = ["select", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO", "FIT_MAX_NFEV",
+def superposed_ranking(target: Target, first: Round, extended: Evaluated, cands: list) -> list:
+    """Candidates ranked by their screened effect *added* to an extended model, without runs.
+
+    Forward selection's choice of whom to screen again (:mod:`orchestrator.inverse.diagnose`):
+    each candidate's screening signals of round 1 enter as a change on top of the extended
+    model's, ``s_ext + (s_c(x) - s_ref)`` (superposition: a second effect changes the
+    signals about as it did on the nominal model, to first order), and the dense 1-D
+    search ranks them by chi-square. The best few are then screened and fitted for real.
+    """
+    ref = first.reference.cmp.simulated
+    out = []
+    for c in cands:
+        grid = first.screened.get(c, {})
+        xs = np.array(sorted(grid))
+        if xs.size < 2:
+            continue
+        sig = [{k: extended.cmp.simulated[k] + (grid[x][k] - ref[k]) for k in ref} for x in xs]
+        out.append((dense_search(target, kind_of(c), xs, sig)[1].chi2, c))
+    return [c for _, c in sorted(out, key=lambda t: t[0])]
+
+
+__all__ = ["select", "superposed_ranking", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO", "FIT_MAX_NFEV",
            "FINE_MAX_NFEV", "PENALTY"]

@@ -43,11 +43,12 @@ def unit_covariance(jac: np.ndarray, r: np.ndarray, n_eff: float) -> np.ndarray:
     tau = n / max(n_eff, 1.0)
     lam, vec = np.linalg.eigh(jac.T @ jac)
     top = max(float(lam.max()), 1e-300)
-    inv = np.where(lam > RCOND * top, 1.0 / np.maximum(lam, 1e-300), np.inf)
-    with np.errstate(invalid="ignore"):
-        var = (vec ** 2) @ inv   # diagonal of V diag(1/lam) V^T
-        cov = (vec * np.where(np.isfinite(inv), inv, 0.0)) @ vec.T
-    cov[np.diag_indices(k)] = var
+    seen = lam > RCOND * top
+    inv = np.where(seen, 1.0 / np.maximum(lam, 1e-300), 0.0)
+    cov = (vec * inv) @ vec.T
+    # a parameter with a share of an unseen direction (above round-off) is not determined at all
+    blind = ((vec ** 2)[:, ~seen] > 1e-12).any(axis=1)
+    cov[blind, blind] = np.inf
     return tau * s2 * cov
 
 
