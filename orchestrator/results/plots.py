@@ -156,7 +156,7 @@ def plot_contact_path(x, eta, z, parts, x_tcp: float, label: str):
     for k, name in enumerate(("wing rail", "nose")):
         on = sel & (parts[:, k] > 0)
         ax[0].plot(d[on], 1e3 * eta[on, k], ".", ms=2, label=name)
-    ax[0].set_ylabel("contact position on the rail,\nfrom the running edge [mm]")
+    ax[0].set_ylabel("contact position [mm] from the\nthrough route's running edge")
     ax[0].set_title(f"{label}: contact path through the crossing (top view) and wheel trajectory")
     ax[0].legend(fontsize=8)
     ax[1].plot(d[sel], 1e3 * z[sel], lw=1)
