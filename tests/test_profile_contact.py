@@ -199,3 +199,37 @@ def test_wheel_polygon_and_rail_sinusoid_are_the_same_contact_input():
     k_h = 1.5 * HERTZ_CONSTANT ** (2 / 3) * Q0 ** (1 / 3)
     interp = a * (2 * np.pi / lam) ** 2 * 0.0002 ** 2 / 8
     assert np.abs(forces[0] - forces[1]).max() <= 1.5 * k_h * interp
+
+
+@pytest.mark.parametrize("override, key", [
+    ("track.crossing.geometry=wedge", "track.crossing.geometry"),
+    ("vehicle.lateral_offset=0.05", "vehicle.lateral_offset"),
+    ("track.crossing.profiles.nose_wear=[0.001]", "track.crossing.profiles.nose_wear"),
+    ("vehicle.wheel_flat.length=0.04", "vehicle.wheel_flat.depth"),
+    ("vehicle.lateral_offset_table.x=[1.0,0.5]", "vehicle.lateral_offset_table.x"),
+    ("track.irregularity.psd=[1e-7]", "track.irregularity.psd"),
+])
+def test_contact_keys_bad_input_names_the_key(override, key):
+    """Bad contact keys are one clear error naming the key (README "Scenario YAML")."""
+    from orchestrator.inputs.errors import ScenarioError
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(ROOT / "scenarios" / "profiles.yaml", [override])
+    assert exc.value.key == key, str(exc.value)
+
+
+def test_profiles_scenario_keys_reach_the_contact_parameters(tmp_path):
+    """scenarios/profiles.yaml and a measured wheel profile / rail irregularity file end up in
+    track.params.ContactParams (the files read, their columns in SI units)."""
+    wheel = tmp_path / "wheel.csv"
+    wheel.write_text("s,F\n-0.06,0.02\n0.0,0.0\n0.06,-0.002\n", encoding="utf-8")
+    rail = tmp_path / "rail.csv"
+    rail.write_text("0.0,0.0,0.0\n10.0,1e-4,-1e-4\n", encoding="utf-8")
+    sc = load_scenario(ROOT / "scenarios" / "profiles.yaml",
+                       [f"vehicle.wheel_profile.file={wheel}", f"track.irregularity.file={rail}",
+                        "vehicle.lateral_offset=0.002", "vehicle.wheel_polygon.amplitude=1e-5"])
+    c = sc.track.contact
+    assert c.geometry == "profiles" and c.lateral_offset == 0.002
+    assert c.wheel_table == ((-0.06, 0.0, 0.06), (0.02, 0.0, -0.002))
+    assert c.rail_table == ((0.0, 10.0), (0.0, 1e-4), (0.0, -1e-4))
+    assert dict(c.wheel_polygon)["amplitude"] == 1e-5 and c.irregular
+    assert dict(c.crossing)["tip_drop"] == 0.004
