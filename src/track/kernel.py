@@ -22,6 +22,13 @@ geometry, whose height functions are :mod:`track.contact`'s, compiled). When a w
 enters an element whose data (load rows, residual flexibility, influence columns
 ``A^{-1} r``) are not loaded, it returns :data:`NEED_ELEMENT` before touching
 anything; the caller loads them and calls again (about one step in thirty).
+With the profile contact (:class:`track.contact.TableGeometry`) the surface code is
+``SURF_TABLE + t``: the heights and the Hertz constants of both surfaces are looked up
+bilinearly in contact table ``t`` at the wheel's x and lateral offset
+(:func:`track.contact.table_surface`, compiled), so each wheel and surface has its own
+constant (``chw``); every other code gives both surfaces the one constant ``par[P_CH]``,
+and the force law (:func:`track.contact.hertz_pair`) does the same operations as before,
+so the dip model's numbers are unchanged to the last bit.
 
 Step matrix. ``A = M + (1+alpha)(gamma h C + beta h^2 K)`` is symmetric positive
 definite, so it is factorized once as ``P A P^T = L D L^T`` (SuperLU without
@@ -531,7 +538,8 @@ def _contact_newton(chw, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, 
 
     ``w = wlin - G (Fc - Fc0) - res Fc`` with ``wlin`` the deflection of the pass's linear
     solution ``acc_lin``; each sweep updates every wheel with its own diagonal Jacobian.
-    ``chw[i]``: the Hertz constants of wheel i's surfaces [N/m^1.5]. Leaves the forces in ``Fn`` [N] and, per wheel, (hertz force, its parts, deflection)
+    ``chw[i]``: the Hertz constants of wheel i's surfaces [N/m^1.5]. Leaves the forces in ``Fn`` [N]
+    and, per wheel, (hertz force, its parts, deflection)
     in ``out``; returns False when ``max_newton`` sweeps do not converge.
     """
     m = Fn.size
