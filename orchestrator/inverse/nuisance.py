@@ -35,8 +35,10 @@ catalogue's causes are screened:
 3. **Vehicle and track damping** (:func:`fit_vehicle_and_damping`). Bounded least squares
    (:func:`orchestrator.inverse.fitting.fit_unit_cube`, as the diagnosis's cause fits)
    of the wheelset mass, the primary stiffness and damping, the pads' and the bed's
-   damping, from the nominal values, in a box that is their prior (:data:`PRIORS`:
-   +-20 % for the vehicle, a factor 2 for the damping) — and, with them, the speed
+   damping, from the nominal values, in a box :data:`BOX_WIDEN` times their prior
+   (:data:`PRIORS`: +-20 % for the vehicle, a factor 2 for the damping; a truth at the
+   prior's edge must be inside the box, measured: c1 +20 % was refused when the box was
+   the prior) — and, with them, the speed
    (+-0.5 % around stage 1's) and the time shift (+-:data:`SHIFT_BOX`; a new shift needs
    no run). Without those two the vehicle soaked up the timing: measured on a +3 %,
    heavier, differently damped truth, a 20 us shift error is worth 40 % of J, and the
@@ -50,17 +52,19 @@ catalogue's causes are screened:
    widened by the distance the linearised model still predicts to the optimum
    (:func:`_intervals`).
    A value is *accepted* only if it is identifiable (its interval narrower than
-   :data:`IDENT_SHARE` of the prior) and not pressed against the prior's edge (within
-   :data:`EDGE` of it: the data want more than a vehicle known to +-20 % can differ —
-   that is a track effect, such as a worn nose, not a vehicle); the others stay at
-   their nominal values. The stage is then kept only if its accepted values lower both the
+   :data:`IDENT_SHARE` of the prior), not pressed against the box's edge (within
+   :data:`EDGE` of it) and its interval reaches into the prior: otherwise the data want
+   more than a vehicle known to +-20 % can differ — a track effect, such as a worn nose
+   (measured: it pushed k1, c1 and the dampings to the edges), not a vehicle; the others
+   stay at their nominal values. The stage is then kept only if its accepted values lower both the
    chi-square and J (else all stay nominal); the refined speed and shift are kept only
    with an accepted vehicle or damping value (measured: alone, the shift moved to soak
    up a void's misfit and raised J by 0.7 %).
 
 :class:`NuisanceFit` is the result; :func:`fit_nuisance` leaves the target with the
 accepted gains (:attr:`~orchestrator.inverse.objective.Target.gains`) and the time shift
-of the speed-corrected run, so every later comparison uses them.
+(the speed-corrected run's, or stage 3's when that stage was kept), so every later
+comparison uses them.
 """
 from __future__ import annotations
 
@@ -82,7 +86,8 @@ GAIN_Z = 4.0           # robust z of ln g within the group: a gain outlier
 GAIN_MIN = 0.03        # ... and off by at least 3 % (below, a gain cannot be told from model error)
 NEIGHBOUR_DEV = 0.05   # a neighbour off by more than 5 % in ln g: the neighbourhood moved (a track cause)
 FIT_MAX_NFEV = 4       # least-squares iterations of the vehicle / damping fit
-EDGE = 0.02            # a value within 2 % of the prior box's edge (unit cube) is pressed against it
+BOX_WIDEN = 1.5        # the fit's box is the prior widened 1.5x (on its scale): a truth at the prior's edge is inside
+EDGE = 0.02            # a value within 2 % of the box's edge (unit cube) is pressed against it
 IDENT_SHARE = 0.5      # identifiable: the 90 % interval narrower than this share of the prior
 Z90 = 1.6449           # two-sided 90 % normal quantile
 CHI2_90 = 2.706        # 90 % quantile of chi-square with one degree of freedom (a profile interval)
@@ -313,11 +318,13 @@ class _Box:
     lo: np.ndarray
     hi: np.ndarray
     log: np.ndarray
+    prior_lo: np.ndarray
+    prior_hi: np.ndarray
 
     @classmethod
     def of(cls, raw: dict, notes: list) -> "_Box":
         """The :data:`PRIORS` whose nominal value the scenario has (a third-party vehicle may not)."""
-        names, nom, lo, hi, log = [], [], [], [], []
+        names, nom, lo, hi, log, plo, phi = [], [], [], [], [], [], []
         for name, (cause, (a, b), is_log) in PRIORS.items():
             try:
                 x = float(CATALOGUE[cause].nominal(raw, None)[0])
@@ -327,8 +334,11 @@ class _Box:
             if not x > 0:
                 notes.append(f"{name}: not fitted (nominal {x:g})")
                 continue
-            names.append(name), nom.append(x), lo.append(a * x), hi.append(b * x), log.append(is_log)
-        return cls(names, *(np.array(v, float) for v in (nom, lo, hi)), np.array(log, bool))
+            wa, wb = (a ** BOX_WIDEN, b ** BOX_WIDEN) if is_log else (1 - BOX_WIDEN * (1 - a), 1 + BOX_WIDEN * (b - 1))
+            names.append(name), nom.append(x), lo.append(wa * x), hi.append(wb * x), log.append(is_log)
+            plo.append(a * x), phi.append(b * x)
+        return cls(names, *(np.array(v, float) for v in (nom, lo, hi)), np.array(log, bool),
+                   *(np.array(v, float) for v in (plo, phi)))
 
     def values(self, u) -> np.ndarray:
         """Values of unit-cube points (not clipped: an interval may reach past the box)."""
@@ -443,15 +453,18 @@ class _Runs:
 
 
 def _accepted(box: _Box, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, notes: list) -> np.ndarray:
-    """Which box parameters are accepted: identifiable and not pressed against the prior's edge (module doc)."""
-    ident = (hi - lo)[:-1] < IDENT_SHARE
+    """Which box parameters are accepted (module doc): identifiable, not pressed against the box's edge,
+    and the 90 % interval reaching into the prior."""
+    ident = (hi - lo)[:-1] < IDENT_SHARE / BOX_WIDEN
     at_edge = (u[:-1] < EDGE) | (u[:-1] > 1.0 - EDGE)
-    for name, i, e in zip(box.names, ident, at_edge):
-        if e:
-            notes.append(f"{name}: pressed against its prior's edge: refused (a track effect, not the vehicle)")
+    outside = (box.values(lo[:-1]) > box.prior_hi) | (box.values(hi[:-1]) < box.prior_lo)
+    for name, i, e, o in zip(box.names, ident, at_edge, outside):
+        if e or o:
+            notes.append(f"{name}: {'pressed against the edge of its box' if e else 'outside its prior'}: refused "
+                         "(more than the vehicle / track damping can differ: a track effect)")
         elif not i:
             notes.append(f"{name}: not identifiable from these channels: kept at nominal")
-    return ident & ~at_edge
+    return ident & ~at_edge & ~outside
 
 
 def fit_vehicle_and_damping(pool, target: Target, raw: dict, start: Comparison, notes: list) -> _VehicleFit:
