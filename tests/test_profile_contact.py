@@ -233,3 +233,18 @@ def test_profiles_scenario_keys_reach_the_contact_parameters(tmp_path):
     assert c.rail_table == ((0.0, 10.0), (0.0, 1e-4), (0.0, -1e-4))
     assert dict(c.wheel_polygon)["amplitude"] == 1e-5 and c.irregular
     assert dict(c.crossing)["tip_drop"] == 0.004
+
+
+def test_emergent_impact_angle_of_a_kinked_path():
+    """track.cosim.emergent_impact_angle on a path of two straight lines (slopes -5 and +3 mrad) kinked at
+    the transfer (where the nose force first exceeds the wing rail's): the angle is their difference,
+    8 mrad, to round-off (a straight line is fitted exactly by least squares)."""
+    x = np.linspace(10.0, 11.0, 2001)
+    xt = 10.4
+    z = np.where(x < xt, -0.005 * (x - xt), 0.003 * (x - xt))
+    wing = np.where(x < xt, 1e5, 0.0)
+    nose = np.where(x < xt, 0.0, 1e5)
+    em = emergent_impact_angle(x, z, nose, wing)
+    assert em["x_transfer"] == pytest.approx(xt, abs=1e-3)          # the first sample past the kink
+    assert em["angle"] == pytest.approx(0.008, abs=1e-12)
+    assert em["slope_before"] == pytest.approx(-0.005, abs=1e-12)
