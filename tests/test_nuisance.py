@@ -169,8 +169,10 @@ def test_vehicle_damping_speed_and_a_channel_recovered_from_a_different_model(sc
 ])
 def test_a_track_effect_is_not_absorbed(sc, pool, tmp_path, name, effect):
     """A worn nose (15 mrad, nominal 6) or a void with the nominal vehicle: the nuisance fit leaves
-    the misfit to the track causes (measured: J 0.4277 -> 0.4260 for the nose, the wheelset
-    mass moved +4.4 % inside its prior; the void: no change), and turns no channel into a gain."""
+    the misfit to the track causes, and turns no channel into a gain. Measured: J unchanged for
+    both (0.4278, 0.7273): k1, c1 pressed against their box, the others not identifiable, so
+    nothing accepted. (Before the acceptance rules the nose moved the wheelset mass +4.4 % and
+    took 0.4 % of J; a refined shift alone raised the void's J by 0.7 %.)"""
     from orchestrator.inverse.nuisance import fit_nuisance
 
     path, _ = _truth(sc, tmp_path, name, effect=effect)
