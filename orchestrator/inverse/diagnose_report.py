@@ -103,7 +103,7 @@ def _verdict_lines(result: Diagnosis) -> list[str]:
     lines = [f"# Diagnosis of {result.measured}", "",
              f"Scenario `{result.scenario}`; {result.runs} runs in {result.wall_seconds:.0f} s.", "", "## Verdict", ""]
     if a.kind == "named":
-        lines.append(f"**{' + '.join(_label(c) for c in a.causes)}**: {a.reason}")
+        lines.append(f"**named: {' + '.join(_label(c) for c in a.causes)}**. In plain words: {a.reason}")
         for c in a.causes:
             s = c.evidence.get("significance", {})
             amb = (c.ambiguity or {}).get("candidates", [])
@@ -190,7 +190,7 @@ def _baseline_lines(result: Diagnosis, before, after) -> list[str]:
         a = after.channels[k]["nrmse"]
         lines.append(f"| {k} | {v['nrmse']:.4g} | {a:.4g} | {100 * result.gain.channels.get(k, 0.0):.1f} % | "
                      f"{v['t_peak']:.4f} | {v['window'][0]:.4f}–{v['window'][1]:.4f} |")
-    return lines
+    return lines + [""]
 
 
 def _noise_j(result: Diagnosis) -> float:
