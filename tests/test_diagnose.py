@@ -75,8 +75,8 @@ def _field_passage(tmp_path, name: str) -> tuple[dict, object]:
     a finer step drawn, and the passage 3 % faster than the scenario over the nominal 0.16 s — so the record
     reaches 2.6 ms past the end of the nominal run (the case that once ended in the PCHIP traceback).
     ``void_mild``: a void on an instrumented sleeper (a shape that is not a wedge, off the screening grid);
-    ``two``: a void and a soft pad on the sleeper next to it; both through a mild mismatch (wheelset mass +5 %, half the time step:
-    the discretisation error does not cancel).
+    ``two``: a void and a soft pad on the sleeper next to it; both through a mild mismatch (wheelset mass
+    +5 %, half the time step: the discretisation error does not cancel).
     Returns (the hidden case, for the test only; the measured file's path).
     """
     import copy
@@ -410,6 +410,8 @@ def test_rule_rejects_a_small_systematic_improvement_and_accepts_a_real_one():
     assert good.passes and good.share == pytest.approx(1.0, abs=0.05), good
     bad = assess(trade, 1, ref, 0, target)
     assert not bad.passes and any("held out" in r for r in bad.reasons), bad
+    quiet = assess(real, 1, real, 0, _fake_target(channels, {k: 0.05 * sd[k] for k in channels}))   # below noise
+    assert not quiet.passes and quiet.to_json()["share_of_explainable_misfit"] is None   # JSON null, never NaN
 
 
 def test_interval_of_a_linear_fit_is_the_textbook_one():

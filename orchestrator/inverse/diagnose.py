@@ -1,4 +1,4 @@
-"""``turnout diagnose``: what the simulation gets wrong, the cause(s), the extended model, the gain — or the honest "none" / "unexplained".
+"""``turnout diagnose``: what the simulation gets wrong — the cause(s), the extended model, the gain — or "none" / "unexplained".
 
 The procedure (DESIGN.md §4.5; every threshold is a named constant, here or in the
 module that applies it):

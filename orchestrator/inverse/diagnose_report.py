@@ -97,6 +97,10 @@ def _label(c) -> str:
     return c.cause + ("" if c.sleeper is None else f" at sleeper {c.sleeper}")
 
 
+def _share(x) -> str:
+    return "an undefined share" if x is None else f"{100 * x:.0f} %"
+
+
 def _verdict_lines(result: Diagnosis) -> list[str]:
     """The head: the verdict and its evidence in plain words."""
     a = result.answer
@@ -109,8 +113,8 @@ def _verdict_lines(result: Diagnosis) -> list[str]:
             amb = (c.ambiguity or {}).get("candidates", [])
             lines += ["", f"- {_label(c)}: {_fmt(c.parameters)}; J {s.get('objective_reference', float('nan')):.4g}"
                           f" → {c.objective:.4g} (gain {100 * c.gain:.1f} %, "
-                          f"{100 * s.get('share_of_explainable_misfit', float('nan')):.0f} % of the misfit above the "
-                          f"noise); ΔBIC on {s.get('n_eff', 0):.0f} effective samples {s.get('delta_bic_eff', 0):.3g}"
+                          f"{_share(s.get('share_of_explainable_misfit'))} of the misfit above the noise); "
+                          f"ΔBIC on {s.get('n_eff', 0):.0f} effective samples {s.get('delta_bic_eff', 0):.3g}"
                           + (f"; cannot be told apart from {', '.join(amb[1:])}" if len(amb) > 1 else "")
                           + (f"; {c.ambiguity['open_beyond']}" if (c.ambiguity or {}).get("open_beyond") else "")
                           + "."]
@@ -159,7 +163,8 @@ def _interval_lines(result: Diagnosis) -> list[str]:
         name, vals = next(iter(c.parameters.items()))
         vals = vals if isinstance(vals, list) else [vals]
         for i, (v, iv, ok) in enumerate(zip(vals, u["intervals"], u["identifiable"])):
-            lines.append(f"| {_label(c)} | {name}[{i}] | {v:.4g} | {iv[0]:.4g}–{iv[1]:.4g} | {'yes' if ok else 'no'} |")
+            lines.append(f"| {_label(c)} | {name}[{i}] | {v:.4g} | {iv[0]:.4g}–{iv[1]:.4g} | "
+                         f"{'yes' if ok else 'no'} |")
         if u["pin_with"]:
             lines.append(f"\n{_label(c)}: to pin what the data leave open, add {'; '.join(u['pin_with'])}.\n")
     return lines + [""]
@@ -184,7 +189,8 @@ def _baseline_lines(result: Diagnosis, before, after) -> list[str]:
              ", ".join(f"{g} {v:.3g}" for g, v in b.where["groups"].items()) + ".", "",
              "Sleepers (mean nRMSE of their sensors): " +
              ", ".join(f"{k}: {v:.3g}" for k, v in b.where["sleepers"].items()) + ".", "",
-             "| channel | nRMSE before | nRMSE after | gain | largest residual at [s] | 80 % of residual energy in [s] |",
+             "| channel | nRMSE before | nRMSE after | gain | largest residual at [s] "
+             "| 80 % of residual energy in [s] |",
              "|---|---|---|---|---|---|"]
     for k, v in before.channels.items():
         a = after.channels[k]["nrmse"]

@@ -9,7 +9,8 @@ next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of
    screening runs (:func:`orchestrator.inverse.screening.dense_search`, no runs);
 3. :func:`_confirm`: the :data:`CONFIRM` best re-run at their best magnitude;
 4. :func:`_coarse_fits`, :func:`_fine_fits`: bounded least squares (:class:`CauseFitter`;
-   a void first as a wedge, :func:`cause_stages`), all parameters of the best and of
+   a void first as a wedge, :func:`cause_stages`, started from its screened uniform gap
+   or a one-sided wedge, whichever fits better), all parameters of the best and of
    up to :data:`FIT` - 1 runners-up within a chi-square factor :data:`FIT_RATIO`;
 5. :func:`_rank`: the fitted and confirmed candidates by their BIC on the effective
    sample size (:func:`orchestrator.inverse.significance.bic_eff`, N_eff of the best
@@ -114,7 +115,7 @@ class CauseFitter:
             def batch(ps, to_u=to_u):
                 return self.residuals([np.clip(to_u(p), 0.0, 1.0) for p in ps])
 
-            p0 = u_best[[0, -1]] if n == 2 else u_best   # the wedge starts from the current ends
+            p0 = self._wedge_start(u_best, to_u) if n == 2 else u_best
             fit_unit_cube(batch, p0, max_nfev=max_nfev)
             if any(cm is not None for cm in self.cache.values()):
                 u_best = self.best()
@@ -122,6 +123,19 @@ class CauseFitter:
         if best is None or best.chi2 > start.cmp.chi2:   # the fit never did better than its start
             return Evaluated(start.candidate, start.values, start.cmp, k, "fitted")
         return Evaluated(start.candidate, kind.from_unit(u_best), best, k, "fitted")
+
+    def _wedge_start(self, u: np.ndarray, to_u) -> np.ndarray:
+        """The wedge's start: the current ends, or a one-sided wedge to the same peak if that fits better.
+
+        A uniform screened gap that lifts the whole sleeper off the bed has no gradient
+        (no point touches the ballast, a small change of any gap changes nothing), so a
+        fit started there stays there; the two one-sided wedges (peak at one end, 0 at the
+        other) touch the bed at one end. Two runs.
+        """
+        ends = [u[[0, -1]], np.array([u.max(), 0.0]), np.array([0.0, u.max()])]
+        comps = self.runs([np.clip(to_u(p), 0.0, 1.0) for p in ends])
+        chi2 = [cm.chi2 if cm is not None else np.inf for cm in comps]
+        return ends[int(np.argmin(chi2))]
 
     def jacobian(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(Jacobian of the weighted residuals in the unit cube, the residuals) at ``values``."""
@@ -285,5 +299,5 @@ def superposed_ranking(target: Target, first: Round, extended: Evaluated, cands:
     return [c for _, c in sorted(out, key=lambda t: t[0])]
 
 
-__all__ = ["select", "superposed_ranking", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO", "FIT_MAX_NFEV",
-           "FINE_MAX_NFEV", "PENALTY"]
+__all__ = ["select", "superposed_ranking", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO",
+           "FIT_MAX_NFEV", "FINE_MAX_NFEV", "PENALTY"]

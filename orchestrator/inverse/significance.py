@@ -192,7 +192,7 @@ class Evidence:
         1 - J_cause / J_ref.
     share : float
         (J_ref - J_cause) / (J_ref - J_noise): share of the explainable misfit removed
-        (NaN when the reference is at or below the noise objective).
+        (NaN when the reference is at or below the noise objective; ``null`` in JSON).
     objective_ref, objective_noise : float
         J_ref and J_noise.
     delta_bic : float
@@ -225,7 +225,8 @@ class Evidence:
 
     def to_json(self) -> dict:
         """JSON-able dict (keys as the attributes, plus ``passes`` and the thresholds)."""
-        return {"gain": self.gain, "share_of_explainable_misfit": self.share, "objective_reference": self.objective_ref,
+        share = self.share if np.isfinite(self.share) else None   # undefined at or below the noise: null, not NaN
+        return {"gain": self.gain, "share_of_explainable_misfit": share, "objective_reference": self.objective_ref,
                 "objective_noise": self.objective_noise, "delta_bic_eff": self.delta_bic, "chi2_eff": self.chi2_eff,
                 "n_samples": self.n, "n_eff": self.n_eff, "held_out_groups": self.held_out, "passes": self.passes,
                 "reasons": list(self.reasons),
