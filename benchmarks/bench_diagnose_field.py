@@ -221,6 +221,39 @@ def coverage(case: dict, ans: dict) -> tuple[int, int, int, int]:
     return inside, total, inside_id, total_id
 
 
+def nuisance_truth(truth: dict, raw: dict) -> dict:
+    """The truth's value of each nuisance parameter the diagnosis may estimate (speed, vehicle, damping)."""
+    from orchestrator.inverse.fieldlike import VEHICLE_MISMATCH
+
+    m, veh = truth["mismatch"], raw["vehicle"]
+    cls, names = VEHICLE_MISMATCH[veh["fmu"]]
+    start = veh.get("start_values") or {}
+    out = {n: float(start.get(n, cls.__dataclass_fields__[n].default)) * m["vehicle"].get(n, 1.0) for n in names}
+    out.update(speed=float(veh["speed"]) * m["speed"],
+               ballast_damping=float(raw["track"]["ballast"]["damping_per_length"]) * m["ballast_damping"],
+               rail_pad_damping=float(raw["track"]["rail_pad"]["damping"]) * m["pad_damping"])
+    return out
+
+
+def nuisance_coverage(rows: list[dict]) -> tuple[int, int, list[str]]:
+    """(nuisance intervals containing the truth, intervals, the names of those that miss it) over the rows."""
+    raw = load_scenario(SCENARIO).raw
+    inside = total = 0
+    missed = []
+    for r in rows:
+        iv = (r["answer"].get("nuisance") or {}).get("intervals")
+        if not isinstance(iv, dict):
+            continue
+        for name, value in nuisance_truth(r["truth"], raw).items():
+            b = iv.get(name)
+            if isinstance(b, (list, tuple)) and len(b) == 2 and None not in b:
+                total += 1
+                inside += int(b[0] <= value <= b[1])
+                if not b[0] <= value <= b[1]:
+                    missed.append(f"{r['family']}: {name} {value:.4g} outside [{b[0]:.4g}, {b[1]:.4g}]")
+    return inside, total, missed
+
+
 # ------------------------------------------------------------------------------------------ running
 def run_case(sc, setup: tuple, family: str, seed: int, workers: int, folder: Path, stage: str = "all") -> dict | None:
     """Draw, synthesize and diagnose one case; its row (truth, answer, score, gain, wall).
@@ -364,6 +397,10 @@ def summary(rows: list[dict], seeds: int, wall: float | None) -> str:
                else "- interval coverage: no intervals in diagnosis.json")
     nuis = [r for r in rows if r["answer"].get("nuisance")]
     out.append(f"- nuisance estimates reported in {len(nuis)}/{len(rows)} diagnoses")
+    n_in, n_total, n_missed = nuisance_coverage(rows)
+    if n_total:
+        out.append(f"- nuisance intervals containing the truth: {n_in}/{n_total}"
+                   + (f" (missed: {'; '.join(n_missed[:6])}{' ...' if len(n_missed) > 6 else ''})" if n_missed else ""))
     dropped = [r for r in rows if r["answer"].get("dropped")]
     out.append(f"- diagnoses that dropped variants (with a reason): {len(dropped)}/{len(rows)}")
     errors = [r for r in rows if r["answer"]["kind"] == "error"]
