@@ -491,11 +491,12 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
         ext_raw = named[-1].raw if named else ref_raw
         ext_path = _extend(inp, ext_raw)
         validation = _validate(pool, inp, ext_raw)
+        # inside the pool's lifetime: a named cause's intervals may need Jacobian runs not yet done
+        answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence)
     finally:
         bar.close()
         executor.shutdown(wait=True, cancel_futures=True)
 
-    answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence)
     result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance, causes, legacy,
                        ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
                        time.perf_counter() - t_start, _settings(inp.cands))
