@@ -220,14 +220,10 @@ def _baseline(pool: Pool, inp: _Inputs) -> tuple[Evaluated, Baseline]:
 def _nuisance(pool: Pool, inp: _Inputs, base: Evaluated) -> tuple[dict, Evaluated, dict | None]:
     """Step 2: the nuisance parameters, fitted before any cause (:mod:`orchestrator.inverse.nuisance`).
 
-    Output: the reference scenario the causes are screened on, its evaluation, and the
-    nuisance estimates' JSON (None, and the nominal scenario, when the nuisance stage is
-    not part of this installation). Sets the channel gains on ``inp.target``.
+    Output: the reference scenario the causes are screened on (the nominal one with the
+    nuisance estimates), its evaluation, and the nuisance estimates' JSON. Sets the channel
+    gains on ``inp.target``.
     """
-    import importlib.util
-
-    if importlib.util.find_spec("orchestrator.inverse.nuisance") is None:
-        return inp.raw0, base, None
     from orchestrator.inverse.nuisance import fit_nuisance
 
     nz = fit_nuisance(pool, inp.target, inp.raw0, base.cmp)

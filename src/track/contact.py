@@ -149,18 +149,7 @@ def hertz(w: float, z_wheel: float, surfaces: tuple[float, float], c_h: float = 
     F1, F2 : float
         Force on each surface [N].
     """
-    d1 = surfaces[0] + w - z_wheel
-    d2 = surfaces[1] + w - z_wheel
-    F1 = F2 = k = 0.0
-    if d1 > 0.0:
-        s = sqrt(d1)
-        F1 = c_h * d1 * s
-        k += 1.5 * c_h * s
-    if d2 > 0.0:
-        s = sqrt(d2)
-        F2 = c_h * d2 * s
-        k += 1.5 * c_h * s
-    return F1 + F2, k, F1, F2
+    return hertz_pair(w, z_wheel, surfaces[0], surfaces[1], c_h, c_h)
 
 
 def hertz_pair(w: float, z_wheel: float, z1: float, z2: float, c1: float, c2: float
