@@ -307,10 +307,16 @@ def run_all(families, seeds: int, workers: int, out: Path, stage: str = "all") -
     sc = load_scenario(SCENARIO)
     setup = (instrumented_sleepers(sc), tuple(layout_of(sc).ids))
     out.mkdir(parents=True, exist_ok=True)
+    log = out / "rows.jsonl"
+    # a case already diagnosed in this folder is not run again (resumable; --seeds 3 after --seeds 1 adds two)
+    lines = log.read_text().splitlines() if log.is_file() and stage != "synth" else []
+    done = {(r["family"], r["seed"]) for r in map(json.loads, filter(str.strip, lines))}
     rows = []
     for k in range(seeds):
         for family in families:
             seed = SEED0 + 101 * k
+            if (family, seed) in done:
+                continue
             row = run_case(sc, setup, family, seed, workers, out / f"{family}_{seed}", stage)
             if row is None:
                 print(f"{family:26s} seed {seed}: passage written", flush=True)
