@@ -253,8 +253,9 @@ def _add_figures_command(sub) -> None:
     """The ``figures`` sub-command: its arguments and handler."""
     figs = sub.add_parser("figures", help="regenerate the source papers' figures",
                           description="Run the seed studies (resumable, on the sweep executor) and write the "
-                                      "figures of seed 001 (Figs. 3-7) and seed 000 (Table 1, beam) into DIR.")
-    figs.add_argument("--study", choices=("seed001", "seed000", "all"), default="all")
+                                      "figures of seed 001 (Figs. 3-7) and seed 000 (Table 1, beam) and the "
+                                      "profile study (issue 15: wheel wear x lateral offset x speed) into DIR.")
+    figs.add_argument("--study", choices=("seed001", "seed000", "profiles", "all"), default="all")
     figs.add_argument("--out", metavar="DIR", type=Path, default=RESULTS_DIR / "figures",
                       help="output folder (default: results/figures)")
     _add_executor_options(figs)

@@ -7,6 +7,7 @@ at 70 degrees). 60E1 head (EN 13674-1): radii R300 / R80 / R13, 72 mm head width
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -99,6 +100,24 @@ def test_hollow_wear_by_hand():
     diff = w.radius_increment(s) - w0.radius_increment(s)
     np.testing.assert_allclose(diff, [-d, -d / 2, -d / 2, 0.0, 0.0, 0.0], atol=1e-15)
 
+
+
+def test_default_hollow_band_covers_the_running_band_on_an_inclined_rail():
+    """Consistency check (the hollow's defaults against our own contact geometry, module docstring of
+    track.profiles): the default hollow is centred where the centred new S1002 touches a 60E1 head
+    inclined 1:40 (within 0.5 mm: the contact table's lateral step is 0.1 mm, the centre is given
+    to 1 mm), and the band (centre +- half width) contains every contact point of the wheelset
+    offsets within the flange clearance (+-5 mm: (1435 - 1360 - 2 x 32.5) / 2), with its field-side
+    edge inside the tread (false flange: S1002 is defined to +60 mm)."""
+    from track.contact_geometry import contact_table
+    w = WheelProfile()
+    head = dataclasses.replace(RAIL_HEADS["60E1"], inclination=INCLINATION_1_40)
+    rail = PlainRail(head=head).rail
+    y = np.linspace(-0.005, 0.005, 11)
+    s = contact_table(w, {"rail": rail}, [0.0], y, reference=rail).data["s"][0, 0]
+    assert s[5] == pytest.approx(w.hollow_centre, abs=5e-4)
+    assert w.hollow_centre - w.hollow_half_width < s.min() and s.max() < w.hollow_centre + w.hollow_half_width
+    assert w.hollow_centre + w.hollow_half_width < 0.060 - 0.020      # a false flange >= 20 mm wide
 
 def test_bad_wear_parameters():
     with pytest.raises(ValueError, match="flange_height"):

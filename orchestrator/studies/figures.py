@@ -26,6 +26,13 @@ Seed 000 (Vilhelmson et al.), 1:12 crossing panel (the default scenario):
   scenario (one wheelset, 120 km/h) with a void under the transition sleeper like the one
   seed 000 found, 1 % noise — and the calibrated model is what `turnout diagnose` fits
   to it (seed000_pressure/: diagnosis.json, report.md, extended.yaml).
+
+Profile study (issue 15, the seed's proposed next step; scenarios/profiles.yaml, the 1:12
+crossing with `track.crossing.geometry: profiles`): hollow depth (0, 2 mm) x lateral offset
+(-3, 0, +3 mm) x speed (80, 120 km/h), 12 runs:
+- profiles_study.png: ΔQ, the emergent impact angle and the transfer point behind the
+  theoretical crossing point against speed, one line per hollow depth x offset;
+- profiles_table.csv: one row per run.
 """
 from __future__ import annotations
 
@@ -45,6 +52,10 @@ SPEEDS_KMH = (10, 40, 80, 120, 160, 200)   # seed 001 Fig. 3 range
 ANGLES = (0.006, 0.012, 0.018)             # rad: nominal, worn, severely worn
 PADS = (1.2e8, 1.2e9)                      # N/m: indirect (soft) and direct (stiff) fixing
 KMH = 1 / 3.6
+PROFILES = "profiles.yaml"                 # in scenarios/
+PROFILE_STUDY = {"vehicle.wheel_profile.hollow_depth": [0.0, 0.002],     # m: new, hollow-worn
+                 "vehicle.lateral_offset": [-0.003, 0.0, 0.003],         # m, towards the crossing wheel's field side
+                 "vehicle.speed": [22.2, 33.3]}                          # m/s: 80, 120 km/h
 
 
 def seed001_variations(speeds_kmh=SPEEDS_KMH, angles=ANGLES, pads=PADS) -> dict[str, list]:
@@ -378,4 +389,52 @@ def make_figures(out_dir: Path, study: str = "all", workers: int | None = None, 
     if study in ("seed000", "all"):
         files += seed000_table(out_dir)
         files += seed000_pressure(out_dir, workers=workers, scheduler=scheduler, progress=progress)
+    if study in ("profiles", "all"):
+        files += profile_study(out_dir, workers=workers, scheduler=scheduler, progress=progress)
     return files
+
+
+def profile_study(out_dir: Path, workers: int | None = None, scheduler: str | None = None,
+                  progress: bool = True) -> list[Path]:
+    """Run the profile study (:data:`PROFILE_STUDY` on :data:`PROFILES`, resumable) and write
+    ``profiles_study.png`` and ``profiles_table.csv`` into ``out_dir``."""
+    from orchestrator.inputs.scenario import bundled_scenario
+    from orchestrator.sweeps.plan import expand_grid
+    from orchestrator.sweeps.sweep import run_sweep
+    out_dir = Path(out_dir)
+    res = run_sweep(bundled_scenario(PROFILES), expand_grid(PROFILE_STUDY), out_dir / "profiles_runs",
+                    workers=workers, scheduler=scheduler, progress=progress)
+    if res.failed:
+        raise RuntimeError(f"profile study: {res.summary()}")
+    table = out_dir / "profiles_table.csv"
+    table.write_bytes(res.table.read_bytes())
+    return [profile_study_figure(res.rows, out_dir / "profiles_study.png"), table]
+
+
+def profile_study_figure(rows: list[dict], path: Path) -> Path:
+    """ΔQ, emergent impact angle and transfer point against speed, one line per hollow depth x
+    lateral offset (colour: offset; solid: new wheel, dashed: hollow-worn), from the rows of a sweep
+    over :data:`PROFILE_STUDY`'s keys (numbers, or their text as in ``sweep.csv``)."""
+    plt = _plt()
+    keys = list(PROFILE_STUDY)
+    num = [{k: float(r[k]) for k in keys + ["delta_Q", "impact_angle_emergent", "transfer_behind_tcp"]}
+           for r in rows]
+    panels = (("delta_Q", 1e-3, "ΔQ [kN]"), ("impact_angle_emergent", 1e3, "emergent impact angle [mrad]"),
+              ("transfer_behind_tcp", 1e3, "transfer behind the TCP [mm]"))
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+    hollows = sorted({r[keys[0]] for r in num})
+    offsets = sorted({r[keys[1]] for r in num})
+    for ax, (col, scale, label) in zip(axes, panels):
+        for h, ls in zip(hollows, ("-", "--", ":")):
+            for off, colour in zip(offsets, ("C0", "C1", "C2", "C3", "C4")):
+                sel = sorted((r for r in num if r[keys[0]] == h and r[keys[1]] == off), key=lambda r: r[keys[2]])
+                ax.plot([3.6 * r[keys[2]] for r in sel], [scale * r[col] for r in sel], "o" + ls, color=colour,
+                        label=f"hollow {1e3 * h:.0f} mm, offset {1e3 * off:+.0f} mm")
+        ax.set_xlabel("speed [km/h]")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("1:12 crossing, S1002 on the profile contact: wheel wear x lateral offset x speed")
+    fig.tight_layout()
+    save(fig, path)
+    return Path(path)

@@ -29,6 +29,19 @@ flange height (a vertical stretch of the flange above the 10 mm measuring height
 the change), flange thickness (a lateral reparameterisation that moves the flange face, the back
 of the flange and the tread fixed) and hollow wear (a cos^2 depression of the tread).
 
+Hollow wear, the default band: wear removes material where the wheel runs, so the hollow is
+centred on the running band and the unworn field side of the tread stands proud of it (the
+"false flange", e.g. Fröhling, Ekberg & Kabo, "The detrimental effects of hollow wear — field
+experiences and numerical simulations", Wear 265 (2008) 1283-1291). The default centre,
+``s = +5 mm``, is where the centred new S1002 touches a 60E1 head inclined 1:40 (EN 13481, the
+plain line's inclination on which a wheel wears; :mod:`track.contact_geometry` gives +4.9 mm,
+``tests/test_profiles.py``); the default half width, 30 mm, spans the band the contact covers
+within the flange clearance (-15 .. +13 mm on that rail for wheelset offsets of -5 .. +5 mm) with
+the cos^2 flanks outside it, so the hollow reaches from the flange root (-25 mm; S1002's root
+starts at -26 mm) to 35 mm on the field side, inside the tread (which ends at +60 mm): a false
+flange from 35 to 60 mm. No published width or depth distribution of hollow bands was at hand:
+band and depth are argued here, not taken from measurements.
+
 Rail heads (:class:`RailHead`): 60E1 (EN 13674-1): crown radius R300, then R80, then the R13
 gauge/field corners, head sides at 1:20, head width 72 mm. The standard's drawing (tangent
 points) was not at hand; this module takes the R300/R80 tangent point at ``|u| = 10 mm`` and the
