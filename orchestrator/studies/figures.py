@@ -413,7 +413,7 @@ def profile_study(out_dir: Path, workers: int | None = None, scheduler: str | No
 
 def profile_study_figure(rows: list[dict], path: Path) -> Path:
     """ΔQ, emergent impact angle and transfer point against speed, one line per hollow depth x
-    lateral offset (colour: offset; solid: new wheel, dashed: hollow-worn), from the rows of a sweep
+    lateral offset (colour: offset; solid, circles: new wheel; dashed, squares: hollow-worn), from the rows of a sweep
     over :data:`PROFILE_STUDY`'s keys (numbers, or their text as in ``sweep.csv``)."""
     plt = _plt()
     keys = list(PROFILE_STUDY)
@@ -425,15 +425,15 @@ def profile_study_figure(rows: list[dict], path: Path) -> Path:
     hollows = sorted({r[keys[0]] for r in num})
     offsets = sorted({r[keys[1]] for r in num})
     for ax, (col, scale, label) in zip(axes, panels):
-        for h, ls in zip(hollows, ("-", "--", ":")):
+        for h, ls in zip(hollows, ("o-", "s--", "^:")):
             for off, colour in zip(offsets, ("C0", "C1", "C2", "C3", "C4")):
                 sel = sorted((r for r in num if r[keys[0]] == h and r[keys[1]] == off), key=lambda r: r[keys[2]])
-                ax.plot([3.6 * r[keys[2]] for r in sel], [scale * r[col] for r in sel], "o" + ls, color=colour,
+                ax.plot([3.6 * r[keys[2]] for r in sel], [scale * r[col] for r in sel], ls, color=colour,
                         label=f"hollow {1e3 * h:.0f} mm, offset {1e3 * off:+.0f} mm")
         ax.set_xlabel("speed [km/h]")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    axes[0].legend(fontsize=7, handlelength=3)
     fig.suptitle("1:12 crossing, S1002 on the profile contact: wheel wear x lateral offset x speed")
     fig.tight_layout()
     save(fig, path)

@@ -18,8 +18,11 @@ quantity for the centred wheel on the plain rail (so the plain rail gives 0, as 
 
 Per contact the table also holds the lateral positions on rail (``eta``) and wheel (``s``), the
 rolling radius ``r0 + F(s)``, the contact angle ``atan(dz_wheel/ds)``, the relative curvatures
-``A`` (rolling direction, ``cos(angle)/r``) and ``B`` (lateral: wheel profile curvature,
-convex +, plus the rail head's) of :func:`track.hertz.relative_curvatures`, the Hertz constant
+``A`` (rolling direction, ``cos(angle)/r``, :func:`track.hertz.relative_curvatures`) and ``B``
+(lateral: the wheel's and the rail's curvature, convex +, as the equivalent curvature of the gap
+over the patch, :func:`_gap_curvature`: ``B = -d''/2 cos(angle)^3`` from the least-squares parabola
+through the gap within :data:`PATCH_HALF_WIDTH` of the contact; where that has too few samples,
+the two profiles' curvatures at the point), the Hertz constant
 ``C`` (:func:`track.hertz.hertz_constant`, NaN where the contact is conformal or concave:
 ``B <= 0``) and ``C_vertical = C cos(angle)^2.5`` (vertical force per vertical approach^1.5, the
 normal approach being ``cos(angle)`` times the vertical one and the force's vertical part
@@ -117,6 +120,7 @@ def _wheel_samples(wheel, s: np.ndarray) -> dict:
                 curv=np.where(bad, 0.0, curv))
 
 
+PATCH_HALF_WIDTH = 0.0035   # m, the Hertz semi-axis across the track of the centred new S1002 on 60E1 at 98.1 kN
 SMOOTH_RADIUS = 1e-3   # m: a gap function curved tighter than this radius at its maximum is a corner, not refined
 
 
@@ -151,7 +155,7 @@ def _surface_contacts(rail_fn, wheel, x: np.ndarray, y: np.ndarray, eta_tl: floa
     ws = _wheel_samples(wheel, s)
     zr, kr = rail_fn(x[:, None], eta[None, :])                 # (nx, neta)
     nx, ny, ne = x.size, y.size, eta.size
-    out = {f: np.full((nx, ny), np.nan) for f in ("dz", "eta", "s", "slope", "kw", "kr")}
+    out = {f: np.full((nx, ny), np.nan) for f in ("dz", "eta", "s", "slope", "kw", "kr", "d2")}
     step = max(1, CHUNK // max(1, ny * ne))
     for a in range(0, nx, step):
         b = min(nx, a + step)
@@ -167,7 +171,37 @@ def _surface_contacts(rail_fn, wheel, x: np.ndarray, y: np.ndarray, eta_tl: floa
         out["slope"][a:b] = np.where(hit, ws["slope"][iy, i], np.nan)
         out["kw"][a:b] = np.where(hit, ws["curv"][iy, i], np.nan)
         out["kr"][a:b] = np.where(hit, kr[np.arange(a, b)[:, None], i], np.nan)
+        out["d2"][a:b] = np.where(hit, _gap_curvature(d, i, d_eta), np.nan)
     return out
+
+
+def _gap_curvature(d: np.ndarray, i: np.ndarray, d_eta: float, half_width: float = PATCH_HALF_WIDTH) -> np.ndarray:
+    """Second derivative of the gap function ``d`` (..., n) at its maximum ``i``, from the least-squares
+    parabola through the finite samples within ``half_width`` of it (NaN with fewer than 5 of them).
+
+    The Hertz contact sees the separation of the surfaces across its patch, not their curvature at
+    one point: where the contact sits at a kink (the ridge of a narrow nose, two heads intersecting)
+    or near a tangent point of two arcs (R13 / R80 of a head), the curvature at the point is that of
+    whichever side the sample lies on and jumps as the point crosses; the parabola over the patch
+    changes continuously. On a single arc it is the arc's curvature to O((half_width / R)^2)."""
+    n = d.shape[-1]
+    k = max(2, int(round(half_width / d_eta)))
+    off = np.arange(-k, k + 1)
+    idx = i[..., None] + off
+    inside = (idx >= 0) & (idx < n)
+    v = np.take_along_axis(d, np.clip(idx, 0, n - 1), axis=-1)
+    ok = inside & np.isfinite(v)
+    u = off * d_eta
+    w = ok.astype(float)
+    v = np.where(ok, v, 0.0)
+    S = [np.sum(w * u ** p, axis=-1) for p in range(5)]
+    T = [np.sum(v * u ** p, axis=-1) for p in range(3)]
+    M = np.stack([np.stack([S[0], S[1], S[2]], -1), np.stack([S[1], S[2], S[3]], -1),
+                  np.stack([S[2], S[3], S[4]], -1)], -2)
+    enough = ok.sum(axis=-1) >= 5
+    M = np.where(enough[..., None, None], M, np.eye(3))
+    c = np.linalg.solve(M, np.stack(T, -1)[..., None])[..., 0]
+    return np.where(enough, 2.0 * c[..., 2], np.nan)
 
 
 def contact_table(wheel, surfaces: dict, x, y, gauge: float = 1.435, d_eta: float = D_ETA,
@@ -210,7 +244,8 @@ def contact_table(wheel, surfaces: dict, x, y, gauge: float = 1.435, d_eta: floa
         c = _surface_contacts(fn, wheel, x, y, eta_tl, d_eta)
         angle = np.arctan(c["slope"])
         radius = wheel.radius + wheel.radius_increment(c["s"])
-        A, B = relative_curvatures(radius, c["kw"], c["kr"], 0.0, angle)
+        A, B_point = relative_curvatures(radius, c["kw"], c["kr"], 0.0, angle)
+        B = np.where(np.isfinite(c["d2"]), -0.5 * c["d2"] * np.cos(angle) ** 3, B_point)
         with np.errstate(invalid="ignore"):
             C = hertz_constant(A, B, Es)
         vals = dict(z=c["dz"] - z_ref, eta=c["eta"], s=c["s"], radius=radius, angle=angle, A=A, B=B, C=C,
