@@ -160,8 +160,8 @@ def test_emergent_impact_angle_new_crossing_and_nose_wear():
 
     Range: the only published figure found (seed 001: B. Pålsson, "A parameterized turnout model
     for simulation of dynamic vehicle-turnout interaction with an application to crossing geometry
-    assessment", Lecture Notes in Mechanical Engineering (IAVSD 2019), Springer 2020, pp. 351-358,
-    §5 "crossing geometry degradation", the text before its Fig. 2) takes 6 mrad as a typical impact
+    assessment", Lecture Notes in Mechanical Engineering, Springer 2020, pp. 351-358,
+    doi:10.1007/978-3-030-38077-9_41, §5 "Demonstration case", before its Fig. 2) takes 6 mrad as a typical impact
     angle of a nominal crossing of its type (60E1-R760-1:15), 12 mrad as worn and 18 as severely
     worn. No published range of impact angles for new crossings of about 1:12 was found with the
     search tools at hand (README "Wheel–rail profiles"), so the band 3-12 mrad (half the nominal
