@@ -47,6 +47,12 @@ What pythonfmu 0.7 does, and what this class changes (names are pythonfmu's):
     fails its initialization with that message and discards every ``doStep``, until a
     finite value replaces it before exitInitializationMode.  (pythonfmu gives setters no
     status to return, and raising would be fmi2Fatal.)
+(h) Per-step cost: pythonfmu's ``get_real`` / ``set_real`` look every reference up and test
+    its type on each call; here the Real variables are indexed once at registration
+    (:meth:`get_real`, :meth:`set_real`; a reference that is not a Real variable, or a Real
+    without a setter, takes pythonfmu's own path and its error), and ``do_step`` tests its
+    inputs' finiteness with one sum (an infinite or NaN input makes it non-finite; a finite
+    sum that overflows falls through to the per-input test, which then finds nothing).
 
 Subclass contract: register variables with :meth:`add_parameter`,
 :meth:`add_input`, :meth:`add_output` in ``__init__``; implement
@@ -111,6 +117,8 @@ class CosimSlave(Fmi2Slave):
         self._units: Dict[str, str] = {}
         self._initial_dependencies: Dict[str, tuple] = {}
         self._real_inputs: list = []          # (name, getter) for the finiteness check
+        self._real_getters: Dict[int, Callable[[], Any]] = {}   # value reference -> getter, (h)
+        self._real_setters: Dict[int, Callable[[Any], None]] = {}
         self._failure: Optional[str] = None   # set when initialisation failed
         self._restoring = False               # True while _set_fmu_state restores variables
         self._rejected: Dict[str, str] = {}   # parameter name -> why its last value was refused
@@ -123,6 +131,27 @@ class CosimSlave(Fmi2Slave):
             raise ValueError(f"unknown unit {unit!r} for {var.name}; add it to fmus.base.UNITS")
         self._units[var.name] = unit
         self.register_variable(var, nested=False)
+        if isinstance(var, Real):
+            self._real_getters[var.value_reference] = var.getter
+            if var.setter is not None:
+                self._real_setters[var.value_reference] = var.setter
+
+    def get_real(self, vrs):
+        """Values of the Real variables ``vrs`` (module docstring, (h))."""
+        getters = self._real_getters
+        try:
+            return [float(getters[vr]()) for vr in vrs]
+        except KeyError:
+            return super().get_real(vrs)
+
+    def set_real(self, vrs, values):
+        """Set the Real variables ``vrs`` (module docstring, (h))."""
+        setters = self._real_setters
+        if all(vr in setters for vr in vrs):
+            for vr, value in zip(vrs, values):
+                setters[vr](value)
+        else:
+            super().set_real(vrs, values)
 
     @staticmethod
     def _describe(description: str, unit: str) -> str:
@@ -264,10 +293,9 @@ class CosimSlave(Fmi2Slave):
             self.log_error(f"doStep at t = {current_time!r} discarded: step size {step_size!r} "
                            "is not positive and finite")
             return False
-        for name, getter in self._real_inputs:
-            if not math.isfinite(getter()):
-                bad = ", ".join(f"{n} = {float(g())!r}" for n, g in self._real_inputs
-                                if not math.isfinite(g()))
+        if not math.isfinite(sum([g() for _, g in self._real_inputs])):
+            bad = ", ".join(f"{n} = {float(g())!r}" for n, g in self._real_inputs if not math.isfinite(g()))
+            if bad:
                 self.log_error(f"doStep at t = {current_time!r} discarded: non-finite input {bad}; "
                                "the state stays at the current communication point")
                 return False

@@ -607,7 +607,9 @@ class Track(CosimSlave):
         """Raise ValueError if a wheel's input x lies outside the modelled panel."""
         sleepers = self._model.layout.sleepers
         lo, hi = sleepers[0].x, sleepers[-1].x
-        outside = np.flatnonzero((self._x < lo) | (self._x > hi))
+        if lo <= self._x.min() and self._x.max() <= hi:   # the common case, without temporaries
+            return
+        outside = np.flatnonzero(~((self._x >= lo) & (self._x <= hi)))
         if outside.size:
             i = int(outside[0])
             raise ValueError(f"wheel{i + 1}_x = {self._x[i]:.4f} m is outside the modelled panel "

@@ -59,9 +59,11 @@ class InProcessVehicle:
         self.hold = hold
         self.stepper = None
         self.t = 0.0
+        self._last = None     # the outputs since the last step (they change only with a step)
 
     def initialize(self, h: float) -> None:
         self.stepper = self._stepper_cls(self.model, h, hold=self.hold, q0=self._q0, Fz0=self.Fz0)
+        self._last = None
 
     def get_state(self):
         return self.stepper.get_state(), self.t
@@ -69,8 +71,10 @@ class InProcessVehicle:
     def set_state(self, s) -> None:
         self.stepper.set_state(s[0])
         self.t = s[1]
+        self._last = None
 
     def step(self, t: float, h: float, Fz: np.ndarray) -> None:
+        self._last = None
         self.stepper.step(Fz)
         self.t = t + h
 
@@ -81,9 +85,12 @@ class InProcessVehicle:
         turn the start-of-step values a Jacobi master holds while the vehicle steps into
         end-of-step ones (the track then extrapolated them a second time: peak forces 1 %
         off the FMU backend's on the default scenario). FMU outputs are copies by nature.
+        Computed once per communication point.
         """
-        return (self.model.wheel_x(self.t, self.x0, self.speed), self.stepper.wheel_z.copy(),
-                self.stepper.wheel_vz.copy())
+        if self._last is None:
+            self._last = (self.model.wheel_x(self.t, self.x0, self.speed), self.stepper.wheel_z.copy(),
+                          self.stepper.wheel_vz.copy())
+        return self._last
 
     def terminate(self) -> None:
         pass
@@ -244,24 +251,30 @@ class FmuVehicle:
         check_vehicle_fmu(path, ports, {**params, **start_values})  # before the FMU is loaded (ports.py)
         self.unit = FmuUnit(path, "vehicle", {**params, **start_values})
         self.n = len(ports)
-        self._x = self.unit.real_port([p.x for p in ports])
-        self._z = self.unit.real_port([p.z for p in ports])
-        self._vz = self.unit.real_port([p.vz for p in ports])
+        # one port for the outputs (x, z, vz of every wheel: one fmi2GetReal per read)
+        self._out = self.unit.real_port([p.x for p in ports] + [p.z for p in ports] + [p.vz for p in ports])
         self._F = self.unit.real_port([p.Fz for p in ports])
         self._zs = np.array([p.z_sign for p in ports], float)
         self._vzs = np.array([p.vz_sign for p in ports], float)
         self._Fs = np.array([p.Fz_sign for p in ports], float)
+        self._last = None     # the outputs read since the last step (they change only with a step)
 
     def initialize(self, t0: float) -> None:
         self.unit.initialize(t0)
         self.Fz0 = self._Fs * self._F.get()
+        self._last = None
 
     def step(self, t: float, h: float, Fz: np.ndarray) -> None:
+        self._last = None
         self._F.set(self._Fs * Fz)
         self.unit.do_step(t, h)
 
     def outputs(self):
-        return self._x.get().copy(), self._zs * self._z.get(), self._vzs * self._vz.get()
+        """Wheel ``x``, ``z``, ``vz`` in our convention (read once per communication point)."""
+        if self._last is None:
+            o, n = self._out.get(), self.n
+            self._last = o[:n].copy(), self._zs * o[n:2 * n], self._vzs * o[2 * n:]
+        return self._last
 
     def terminate(self) -> None:
         self.unit.terminate()
@@ -278,30 +291,37 @@ class FmuTrack:
         self._work: dict = {}
         w = range(1, n_wheels + 1)
         self._in = self.unit.real_port([f"wheel{i}_{s}" for s in ("x", "z", "vz") for i in w])
-        self._out = self.unit.real_port([f"wheel{i}_{s}" for s in ("Fz", "Fz_rail", "Fz_nose", "rail_z")
-                                         for i in w])
-        self._Fz = self.unit.real_port([f"wheel{i}_Fz_coupling" for i in w])
+        # one port for what is read each step: the vehicle's input first, then the recorded outputs
+        self._out = self.unit.real_port([f"wheel{i}_{s}" for s in ("Fz_coupling", "Fz", "Fz_rail", "Fz_nose",
+                                                                    "rail_z") for i in w])
         self.n = n_wheels
         self._inbuf = np.empty(3 * n_wheels)
+        self._last = None     # the outputs read since the last step
 
     def initialize(self, t0: float, stop_time: float | None = None) -> None:
         self.unit.initialize(t0, stop_time)
+        self._last = None
 
     def step(self, t: float, h: float, x, z, vz) -> None:
         n = self.n
         b = self._inbuf
         b[:n], b[n:2 * n], b[2 * n:] = x, z, vz
+        self._last = None
         self._in.set(b)
         self.unit.do_step(t, h)
 
+    def _read(self) -> np.ndarray:
+        if self._last is None:
+            self._last = self._out.get().copy()
+        return self._last
+
     def forces(self) -> np.ndarray:
-        """The vehicle's input only (read every step; the rest at output steps)."""
-        return self._Fz.get().copy()
+        """The vehicle's input (``Fz_coupling``) [N]: one read per step, which also serves :meth:`outputs`."""
+        return self._read()[:self.n].copy()
 
     def outputs(self):
-        o = self._out.get()
-        n = self.n
-        return o[:n].copy(), np.stack([o[n:2 * n], o[2 * n:3 * n]], axis=1), o[3 * n:].copy()
+        o, n = self._read(), self.n
+        return o[n:2 * n], np.stack([o[2 * n:3 * n], o[3 * n:4 * n]], axis=1), o[4 * n:]
 
     def work(self) -> dict:
         """The track FMU's work counters and wall times [s] (its monitoring outputs), as read at

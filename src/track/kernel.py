@@ -38,6 +38,17 @@ pivoting on the symmetric permutation ``P`` of a minimum-degree ordering of
 against 100k in the LU with the MMD(A^T A) ordering the numpy path uses
 (benchmarks/bench_step.py measures both).
 
+Flat loops. A column of L holds ~10 entries, a row of K ~7: loops over them end
+after a few iterations each, and their mispredicted exits (one per row or column)
+cost more than the arithmetic. So every sparse loop of the step is one flat loop
+over entries ``w[dst[k]] -= val[k] * x[src[k]]``: the products with K and C
+column by column (the targets within a column are distinct), the forward sweep of
+``L y = b`` column by column (``y_j`` is final when column j's entries come: all
+its updates come from columns < j) and the backward sweep of ``L^T z = y`` row by
+row from the last (``z_i`` is final when row i's entries come: its updates come
+from rows > i). Measured on the 64-sleeper panel: solve 77 -> 59 us, K product
+30 -> 20 us (benchmarks/bench_step.py).
+
 Round-off entries. The Craig–Bampton products ``T^T K T`` leave entries that are
 zero in exact arithmetic (the constraint modes are K-orthogonal to the
 fixed-interface modes) at 1e-20..1e-14 of ``sqrt(K_ii K_jj)``; two thirds of the
@@ -215,8 +226,12 @@ class LDLFactor:
     ----------
     perm : ndarray of int64, shape (n,)
         ``(P x)[i] = x[perm[i]]``.
-    Lp, Li, Lx : ndarray
-        Strictly lower part of the unit ``L`` in CSC (int64 pointers and rows).
+    Ls, Ld, Lx : ndarray, shape (2 nnz,)
+        The strictly lower part of the unit ``L`` as the two flat sweeps of
+        :func:`ldl_solve` read it (module docstring, "Flat loops"): entry ``k`` does
+        ``w[Ld[k]] -= Lx[k] * w[Ls[k]]``. The first ``nnz`` entries are L by columns
+        (source: the column, destination: the row), the last ``nnz`` L by rows from the
+        last row (source: the row, destination: the column).
     d : ndarray, shape (n,)
         Diagonal of ``D``.
     """
@@ -232,58 +247,58 @@ class LDLFactor:
         d = lu.U.diagonal()
         if not (d > 0).all():
             raise RuntimeError("LDL^T of the step matrix: non-positive pivot (matrix not positive definite)")
-        Ls = sp.tril(lu.L, -1).tocsc()
-        Ls.sort_indices()
+        Lc = sp.tril(lu.L, -1).tocsc()
+        Lc.sort_indices()
+        Lr = Lc.tocsr()
+        Lr.sort_indices()
+        col_of = np.repeat(np.arange(n), np.diff(Lc.indptr))            # forward: by columns
+        row_of = np.repeat(np.arange(n), np.diff(Lr.indptr))            # backward: by rows, last first
+        back = np.argsort(-row_of, kind="stable")
         self.n = n
         self.perm = p.astype(np.int64)
-        self.Lp = Ls.indptr.astype(np.int64)
-        self.Li = Ls.indices.astype(np.int64)
-        self.Lx = np.ascontiguousarray(Ls.data, dtype=float)
+        self.Ls = np.concatenate([col_of, row_of[back]]).astype(np.int64)
+        self.Ld = np.concatenate([Lc.indices, Lr.indices[back]]).astype(np.int64)
+        self.Lx = np.ascontiguousarray(np.concatenate([Lc.data, Lr.data[back]]), dtype=float)
         self.d = np.ascontiguousarray(d, dtype=float)
         self.work = np.empty(n)
 
     @property
     def nnz(self) -> int:
         """Stored entries of L (strict lower part) plus the diagonal."""
-        return int(self.Lx.size + self.n)
+        return int(self.Lx.size // 2 + self.n)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``A^{-1} b`` for b of shape (n,) or (n, k)."""
         b = np.asarray(b, dtype=float)
         if b.ndim == 1:
             out = np.empty(self.n)
-            ldl_solve(self.perm, self.Lp, self.Li, self.Lx, self.d, b, out, self.work)
+            ldl_solve(self.perm, self.Ls, self.Ld, self.Lx, self.d, b, out, self.work)
             return out
         out = np.empty_like(b, dtype=float)
-        ldl_solve_many(self.perm, self.Lp, self.Li, self.Lx, self.d, np.ascontiguousarray(b), out,
+        ldl_solve_many(self.perm, self.Ls, self.Ld, self.Lx, self.d, np.ascontiguousarray(b), out,
                        np.empty(b.shape))
         return out
 
 
 @_njit
-def ldl_solve(perm, Lp, Li, Lx, d, b, x, work):
+def ldl_solve(perm, Ls, Ld, Lx, d, b, x, work):
     """x = A^{-1} b with ``P A P^T = L D L^T`` (see :class:`LDLFactor`); ``work`` of shape (n,)."""
     n = d.size
+    half = Lx.size // 2
     for i in range(n):
         work[i] = b[perm[i]]
-    for j in range(n):                       # L y = P b, column by column
-        yj = work[j]
-        if yj != 0.0:
-            for k in range(Lp[j], Lp[j + 1]):
-                work[Li[k]] -= Lx[k] * yj
+    for k in range(half):                    # L y = P b, by columns
+        work[Ld[k]] -= Lx[k] * work[Ls[k]]
     for j in range(n):
         work[j] /= d[j]
-    for j in range(n - 1, -1, -1):           # L^T z = D^-1 y, row j of L^T = column j of L
-        s = work[j]
-        for k in range(Lp[j], Lp[j + 1]):
-            s -= Lx[k] * work[Li[k]]
-        work[j] = s
+    for k in range(half, Lx.size):           # L^T z = D^-1 y, by rows from the last
+        work[Ld[k]] -= Lx[k] * work[Ls[k]]
     for i in range(n):
         x[perm[i]] = work[i]
 
 
 @_njit
-def ldl_solve_many(perm, Lp, Li, Lx, d, B, X, work):
+def ldl_solve_many(perm, Ls, Ld, Lx, d, B, X, work):
     """X = A^{-1} B for k columns at once (B, X, work of shape (n, k), C order): the sweeps of
     :func:`ldl_solve` reading the factor once for all columns (the same operations per column).
 
@@ -291,36 +306,40 @@ def ldl_solve_many(perm, Lp, Li, Lx, d, B, X, work):
     k = 1 it takes twice :func:`ldl_solve`'s time (125 vs 65 us at n = 2763, measured).
     """
     n, k = B.shape
+    half = Lx.size // 2
     for i in range(n):
         for c in range(k):
             work[i, c] = B[perm[i], c]
-    for j in range(n):
-        for p in range(Lp[j], Lp[j + 1]):
-            r, l = Li[p], Lx[p]
-            for c in range(k):
-                work[r, c] -= l * work[j, c]
-    for j in range(n):
+    for p in range(Lx.size):
+        if p == half:
+            for j in range(n):
+                for c in range(k):
+                    work[j, c] /= d[j]
+        s, t, l = Ls[p], Ld[p], Lx[p]
         for c in range(k):
-            work[j, c] /= d[j]
-    for j in range(n - 1, -1, -1):
-        for p in range(Lp[j], Lp[j + 1]):
-            r, l = Li[p], Lx[p]
+            work[t, c] -= l * work[s, c]
+    if half == 0:
+        for j in range(n):
             for c in range(k):
-                work[j, c] -= l * work[r, c]
+                work[j, c] /= d[j]
     for i in range(n):
         for c in range(k):
             X[perm[i], c] = work[i, c]
 
 
 @_njit
-def _csr_matvec_sub(p, idx, val, x, out):
-    """out -= X @ x for X in CSR (p, idx, val)."""
-    n = p.size - 1
-    for i in range(n):
-        s = 0.0
-        for k in range(p[i], p[i + 1]):
-            s += val[k] * x[idx[k]]
-        out[i] -= s
+def _coo_matvec_sub(src, dst, val, x, out):
+    """out -= X @ x for X as flat entries ``X[dst[k], src[k]] = val[k]`` (module docstring, "Flat loops")."""
+    for k in range(val.size):
+        out[dst[k]] -= val[k] * x[src[k]]
+
+
+def flat_entries(X: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(src, dst, val)`` of X by columns, for :func:`_coo_matvec_sub` (int64, int64, float64)."""
+    X = sp.csc_matrix(X)
+    X.sort_indices()
+    src = np.repeat(np.arange(X.shape[1], dtype=np.int64), np.diff(X.indptr))
+    return src, X.indices.astype(np.int64), np.ascontiguousarray(X.data, dtype=float)
 
 
 @_njit
@@ -339,12 +358,12 @@ def _correction(k, c, gap, u, v):
 
 
 @_njit
-def _ballast_row(j, D, Zb, have, perm, Lp, Li, Lx, d, e, work, cnt):
+def _ballast_row(j, D, Zb, have, perm, Ls, Ld, Lx, d, e, work, cnt):
     """Make row j of ``Zb`` (``A^{-1} e_{D[j]}``) available; counts the solve."""
     if have[j] == 0:
         e[:] = 0.0
         e[D[j]] = 1.0
-        ldl_solve(perm, Lp, Li, Lx, d, e, Zb[j], work)
+        ldl_solve(perm, Ls, Ld, Lx, d, e, Zb[j], work)
         have[j] = 1
         cnt[C_SOLVES] += 1
 
@@ -402,7 +421,7 @@ def _locate_wheels(par, x, yw, wside, ts, etab, ec, es, ent, W, surf, tg, tz, tc
 
 
 @_njit
-def _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, Cx, qp, vp, sw, y, rhs):
+def _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Ks, Kd, Kx, Cs, Cd, Cx, qp, vp, sw, y, rhs):
     """Newmark predictors and the linear right-hand side of the step.
 
     Fills ``qp``, ``vp`` (predicted displacement [m] and velocity [m/s]) and
@@ -420,8 +439,8 @@ def _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, C
         sw[i] = a1 * vp[i] - a_ * v0[i]                     # damping argument
         y[i] = a1 * qp[i] - a_ * q0[i] + beta_s * sw[i]     # stiffness argument (K part of C folded in)
         rhs[i] = a1 * fgrav[i] - a_ * F0[i]
-    _csr_matvec_sub(Kp, Ki, Kx, y, rhs)
-    _csr_matvec_sub(Cp, Ci, Cx, sw, rhs)
+    _coo_matvec_sub(Ks, Kd, Kx, y, rhs)
+    _coo_matvec_sub(Cs, Cd, Cx, sw, rhs)
 
 
 @_njit
@@ -599,7 +618,7 @@ def _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn,
 
 
 @_njit
-def _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Lp, Li, Lx, dd, unit, work,
+def _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Ls, Ld, Lx, dd, unit, work,
                             corr, newc, acc_lin, cnt):
     """A bushing opened or closed: correct the linear solution ``acc_lin`` through the ballast
     influence rows (solved on first use) instead of a new solve; ``corr = newc``."""
@@ -608,7 +627,7 @@ def _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Lp, Li, Lx, 
         dD = newc[c] - corr[c]
         if abs(dD) > ftol0:
             j = cidx[c]
-            _ballast_row(j, D, Zb, have, perm, Lp, Li, Lx, dd, unit, work, cnt)
+            _ballast_row(j, D, Zb, have, perm, Ls, Ld, Lx, dd, unit, work, cnt)
             f = a1 * dD
             for i2 in range(n):
                 acc_lin[i2] += f * Zb[j, i2]
@@ -690,7 +709,7 @@ def _workspace(work, n, m, nbal):
 @_njit
 def _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts, gd, nr, G, res, zw,
             surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap, qp, vp, W, Ze, corr, newc, Zb, have,
-            perm, Lp, Li, Lx, dd, unit, y):
+            perm, Ls, Ld, Lx, dd, unit, y):
     """The modified-Newton passes of a step: contact Newton, then the ballast bushings' change;
     repeated (with the bushings' influence rows) while a bushing changes state.
 
@@ -707,16 +726,16 @@ def _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, ac
                                  corr, newc)
         if change <= ftol:
             return OK, change, it
-        _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Lp, Li, Lx, dd, unit, y,
+        _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Ls, Ld, Lx, dd, unit, y,
                                 corr, newc, acc_lin, cnt)
     return PASSES_FAILED, change, it
 
 
 @_njit
 def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
-                 Kp, Ki, Kx, Cp, Ci, Cx,
+                 Ks, Kd, Kx, Cs, Cd, Cx,
                  D, bk, bc, bgap, Zb, have,
-                 perm, Lp, Li, Lx, dd,
+                 perm, Ls, Ld, Lx, dd,
                  x, zw, wside, ts, etab, ec, es, ent,
                  T, gd, nr, R, Ze, E, fresh,
                  q1, v1, acc1, F1, Fc1, out, W, surf, wts, work, iwork,
@@ -738,12 +757,12 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     Fc0 : float64[m]
         Contact forces of the last step [N] (the first guess).
     fgrav : float64[n]
-    Kp, Ki, Kx / Cp, Ci, Cx : CSR of the stiffness (with the linear ballast) and of
+    Ks, Kd, Kx / Cs, Cd, Cx : flat entries (:func:`flat_entries`) of the stiffness (with the linear ballast) and of
         ``C_t - beta_s K_t`` (the damping not proportional to K).
     D, bk, bc, bgap : ballast dofs, stiffness [N/m], damping [N s/m], gaps [m].
     Zb : float64[nb, n], have : uint8[nb]
         Ballast influence rows ``A^{-1} e_D`` (filled on demand).
-    perm, Lp, Li, Lx, dd : the LDL^T factor of the step matrix (:class:`LDLFactor`).
+    perm, Ls, Ld, Lx, dd : the LDL^T factor of the step matrix (:class:`LDLFactor`).
     x, zw : float64[m]     wheel track coordinates and vertical positions at the step's end [m].
     wside : int64[m]       side of each wheel (0 left, 1 right).
     ts, etab, ec, es : int64[3], float64[E, 3], float64[E, 4, 4], int64[E]
@@ -786,11 +805,11 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     qp, vp, rhs, y, acc_lin, sw, unit, Fn, wlin, wpred, res, cpl, G, corr, newc = _workspace(work, n, m, nbal)
     cidx = iwork
 
-    _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, Cx, qp, vp, sw, y, rhs)
+    _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Ks, Kd, Kx, Cs, Cd, Cx, qp, vp, sw, y, rhs)
     nc = _ballast_candidates(h, safety, floor, q0, v0, acc0, D, bgap, cidx)
     _ballast_first_guess(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc0, corr, rhs)
     fmax = _wheel_loads(a1, W, T, gd, nr, Fc0, Fn, wts, rhs)
-    ldl_solve(perm, Lp, Li, Lx, dd, rhs, acc_lin, unit)
+    ldl_solve(perm, Ls, Ld, Lx, dd, rhs, acc_lin, unit)
     cnt[C_SOLVES] += 1
     _coupling_blocks(T, gd, nr, Ze, fresh, E)
     _contact_coupling(a1, bh2, W, R, gd, nr, wts, E, qp, G, res, wpred)
@@ -800,7 +819,7 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     # modified-Newton passes: they repeat only while a ballast bushing changes state
     status, change, it = _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts,
                                  gd, nr, G, res, zw, surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap,
-                                 qp, vp, W, Ze, corr, newc, Zb, have, perm, Lp, Li, Lx, dd, unit, y)
+                                 qp, vp, W, Ze, corr, newc, Zb, have, perm, Ls, Ld, Lx, dd, unit, y)
     if status != OK:
         return status, change
 
@@ -968,8 +987,8 @@ class CompiledContacts:
         Kt, Ct = integ._Kt, integ._Ct
         K = prune(Kt)
         Cr = drop_cancelled(Ct - beta_s * Kt, abs(Ct) + beta_s * abs(Kt))
-        self._K = (K.indptr.astype(np.int64), K.indices.astype(np.int64), K.data.copy())
-        self._C = (Cr.indptr.astype(np.int64), Cr.indices.astype(np.int64), Cr.data.copy())
+        self._K = flat_entries(K)
+        self._C = flat_entries(Cr)
         self._bal = (bal.dof.astype(np.int64), bal.k.astype(float), bal.c.astype(float), bal.gap.astype(float))
         self.par = par = np.zeros(N_PAR)
         par[[P_H, P_ALPHA, P_BETA, P_GAMMA, P_SAFETY, P_FLOOR, P_CTOL, P_CREL, P_FTOL, P_FREL, P_MAXPASS,
@@ -1061,7 +1080,7 @@ class CompiledContacts:
             status, change = contact_step(
                 self.par, cnt, it.q, it.v, it.a, it.F, Fc0, self.model.f_gravity,
                 *self._K, *self._C, *self._bal, sh.ldl_Zb, sh.ldl_have,
-                f.perm, f.Lp, f.Li, f.Lx, f.d,
+                f.perm, f.Ls, f.Ld, f.Lx, f.d,
                 x, zw, self.wside, ts, etab, ec, es, self.ent,
                 self.T, self.gd, self.nr, self.R, self.Ze, self.E, self.fresh,
                 new[0], new[1], new[2], new[3], Fc1, out, self.W, self.surf, self.wts, self.work, self.iwork,
