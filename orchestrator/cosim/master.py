@@ -220,7 +220,7 @@ def run_cosim(scenario, backend: str = "fmu", work_dir: Path | None = None, fmu_
     signals = _Signals(run.nsteps // run.every + 1, run.vehicle.n)
     error, t_initialize, t_loop = _drive(run, signals, progress)
     record = _track_record(run) if record_states else None
-    if record is not None:
+    if record is not None and backend == "fmu":   # the FMU's instance and record were freed just now
         _release_freed_memory()
     return _result(run, signals, record, error, t_initialize, t_loop)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -18,10 +19,10 @@ from orchestrator.cosim.master import merge_columns
 from orchestrator.cosim.sensing import read_sensors, sensor_columns
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.track_model import track_model
-from orchestrator.results import plots
+from orchestrator.results import plots, run_figures
 from orchestrator.results.analysis import analyse, analysis_columns, profile_contact
+from orchestrator.results.figure_writer import FigureWriter
 from orchestrator.results.outdir import prepare_out_dir
-from orchestrator.results.plots_layout import plot_layout
 from track.frf import receptance
 from track.model import reference_point
 from track.statics import static_equilibrium
@@ -70,12 +71,40 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     :class:`UserInputError` names the cause.
     """
     t_start = time.perf_counter()
-    out_dir = prepare_out_dir(out_dir)   # warns when it held an earlier run's results
-    model = track_model(scenario.track)   # the model the run builds (its bodies cached) for the post-processing
-    compiled = _compiled_sensors(scenario, model)
-    columns = None if save_states else merge_columns(analysis_columns(model), sensor_columns(model, compiled))
-    res = _cosimulate(scenario, out_dir, progress, backend, columns)
-    t_post = time.perf_counter()
+    with FigureWriter() as figures:   # first: its process imports matplotlib while the co-simulation runs
+        out_dir = prepare_out_dir(out_dir)   # warns when it held an earlier run's results
+        model = track_model(scenario.track)   # the model the run builds (its bodies cached) for the post-processing
+        compiled = _compiled_sensors(scenario, model)
+        columns = None if save_states else merge_columns(analysis_columns(model), sensor_columns(model, compiled))
+        res = _cosimulate(scenario, out_dir, progress, backend, columns)
+        t_post = time.perf_counter()
+        summary, sensors, an, geometry = _post_process(scenario, backend, model, compiled, res)
+        states = _states_to_save(res.track_record) if save_states else None
+        res.track_record = None  # post-processed: what is not asked for is not kept
+        t_write = time.perf_counter()
+        _submit_figures(figures, out_dir, scenario.name, model.layout, res, an, geometry)
+        # ---- signals first: nothing computed is lost if a later step fails
+        _write_signals(out_dir, res, sensors)
+        _write_h5(out_dir / "results.h5", res, sensors, an, states, geometry)
+        del states
+        failed = figures.close()
+    t_end = time.perf_counter()
+    if failed:
+        summary["figures_failed"] = failed
+        for line in failed:
+            print(f"warning: figure {line}", file=sys.stderr)
+    summary["wall_seconds"]["job_total"] = t_end - t_start
+    summary["counters"] = _counters(res, t_write - t_post, t_end - t_write)
+    summary["counters"]["figure_process_peak_rss_mb"] = figures.peak_rss_mb   # None: drawn in this process
+    summary["machine"] = f"{platform.machine()} {platform.system()} py{platform.python_version()}"
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    if res.error:
+        raise UserInputError(f"{res.error} (results up to t = {res.t[-1]:.4g} s written to {out_dir})")
+    return summary
+
+
+def _post_process(scenario, backend: str, model, compiled, res) -> tuple[dict, dict, object, dict | None]:
+    """summary (head and contact), virtual sensors, the analysis and the profile contact geometry."""
     summary = _run_summary(scenario, backend, model, res)
     sensors = _virtual_sensors(scenario, model, compiled, res)
     Q0 = 0.5 * scenario.vehicle.axle_load
@@ -89,26 +118,19 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     if meta is not None:
         summary.update({"crossing_rail": meta["crossing_rail"], "transition_sleeper": meta["transition_sleeper"],
                         "crossing_side": meta["crossing_side"]})
-    states = _states_to_save(res.track_record) if save_states else None
-    res.track_record = None  # post-processed: what is not asked for is not kept
-    t_write = time.perf_counter()
-    # ---- signals first: nothing computed is lost if a later step fails
-    _write_signals(out_dir, res, sensors)
-    _write_h5(out_dir / "results.h5", res, sensors, an, states, geometry)
-    del states
+    return summary, sensors, an, geometry
+
+
+def _submit_figures(figures: FigureWriter, out_dir: Path, name: str, lay, res, an, geometry: dict | None) -> None:
+    """Hand the run's figures to ``figures`` (drawn while the main process writes the results)."""
+    sig = run_figures.plotted_signals(res)
+    meta = getattr(an, "meta", None)
     if meta is not None:
-        _plot_track_results(out_dir, scenario, an)
-    _plot_signals(out_dir, scenario, model.layout, res)
-    if geometry is not None and model.layout.x_tcp is not None:
-        _plot_contact_path(out_dir, model.layout, res, geometry)
-    t_end = time.perf_counter()
-    summary["wall_seconds"]["job_total"] = t_end - t_start
-    summary["counters"] = _counters(res, t_write - t_post, t_end - t_write)
-    summary["machine"] = f"{platform.machine()} {platform.system()} py{platform.python_version()}"
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
-    if res.error:
-        raise UserInputError(f"{res.error} (results up to t = {res.t[-1]:.4g} s written to {out_dir})")
-    return summary
+        figures.submit("envelopes.png, moments.png", run_figures.track_results, out_dir, name, an.arrays, meta,
+                       an.scalars)
+    figures.submit("layout.png, contact_forces.png, displacements.png", run_figures.signals, out_dir, name, lay, sig)
+    if geometry is not None and lay.x_tcp is not None:
+        figures.submit("contact_path.png", run_figures.contact_path, out_dir, lay, sig, geometry)
 
 
 def _cosimulate(scenario, out_dir: Path, progress: bool, backend: str, record_columns: dict | None = None):
@@ -161,48 +183,6 @@ def _states_to_save(rec: dict | None) -> dict | None:
     if rec is None or not len(rec.get("t", ())):
         return None
     return {k: rec[k] for k in STATE_KEYS if k in rec}
-
-
-def _plot_track_results(out_dir: Path, scenario, an) -> None:
-    """envelopes.png and moments.png from the analysis (``an.arrays``, ``an.meta``)."""
-    from track.post import BodyResponse
-
-    meta, a = an.meta, an.arrays
-    rail_name, sl_name = meta["crossing_rail"], f"sleeper_{meta['transition_sleeper']}"
-    t = an.scalars
-    plots.save(plots.plot_envelopes(a["rail_x"], np.stack([a["rail_M_min"], a["rail_M_max"]]),
-                                    a["sleeper_y"], np.stack([a["sleeper_M_min"], a["sleeper_M_max"]]),
-                                    a["ballast_y"], a["ballast_p_max"], rail_name, sl_name),
-               out_dir / "envelopes.png")
-    inst_r = {f"t = {t['time_max_rail_moment']:.4f} s (max rail moment)":
-              BodyResponse(coord=a["rail_x"], w=a["rail_w_at_max"], moment=a["rail_M_at_max"])}
-    inst_s = {f"t = {t['time_max_sleeper_moment']:.4f} s (max sleeper moment)":
-              BodyResponse(coord=a["sleeper_y"], w=a["sleeper_w_at_max"], moment=a["sleeper_M_at_max"])}
-    plots.save(plots.plot_body_lines(inst_r, inst_s, f"{scenario.name}: instants of maximum moment",
-                                     rail_name, f"{sl_name} (crossing transition)",
-                                     marks_rail=[a["x_transition"][0]],
-                                     marks_sleeper=list(a["wheel_y"])), out_dir / "moments.png")
-
-
-def _plot_contact_path(out_dir: Path, lay, res, geometry: dict) -> None:
-    """contact_path.png: the first wheel at the nose, its contact path and vertical trajectory."""
-    i = ["left", "right"].index(lay.crossing_side)      # wheels alternate left, right from the front
-    fig = plots.plot_contact_path(res.x[:, i], geometry["eta"][:, i], res.z[:, i], res.parts[:, i], lay.x_tcp,
-                                  f"wheel {i + 1}")
-    plots.save(fig, out_dir / "contact_path.png")
-
-
-def _plot_signals(out_dir: Path, scenario, lay, res) -> None:
-    """layout.png, contact_forces.png and displacements.png (wheels and the rail under them)."""
-    wheels = range(res.Fz.shape[1])
-    plots.save(plot_layout(lay), out_dir / "layout.png")
-    plots.save(plots.plot_time_series(res.t, {f"wheel {i + 1}": 1e-3 * res.Fz[:, i] for i in wheels},
-                                      "contact force [kN]", f"{scenario.name}: wheel-rail contact forces"),
-               out_dir / "contact_forces.png")
-    series = {f"wheel {i + 1}": 1e3 * res.z[:, i] for i in wheels}
-    series.update({f"rail under wheel {i + 1}": 1e3 * res.rail_z[:, i] for i in wheels})
-    plots.save(plots.plot_time_series(res.t, series, "vertical displacement [mm]",
-                                      f"{scenario.name}: wheel and rail displacement"), out_dir / "displacements.png")
 
 
 def _compiled_sensors(scenario, model):

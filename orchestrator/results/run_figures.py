@@ -1,0 +1,65 @@
+"""The figures of ``turnout run``: drawn from plain arrays (by the figure process of
+:class:`orchestrator.results.figure_writer.FigureWriter`, which imports this module and
+:mod:`orchestrator.results.plots` while the co-simulation runs).
+
+``signals`` is any object with the run's ``t``, ``x``, ``z``, ``Fz``, ``rail_z`` and ``parts``
+(:func:`plotted_signals`: those of a :class:`orchestrator.cosim.master.CosimResult`, without
+the track model and the records it may hold).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from orchestrator.results import plots
+from orchestrator.results.plots_layout import plot_layout
+
+SIGNALS = ("t", "x", "z", "Fz", "rail_z", "parts")
+
+
+def plotted_signals(res) -> SimpleNamespace:
+    """The arrays of ``res`` the figures read (what is sent to the figure process)."""
+    return SimpleNamespace(**{k: getattr(res, k) for k in SIGNALS})
+
+
+def track_results(out_dir: Path, name: str, a: dict, meta: dict, t: dict) -> None:
+    """envelopes.png and moments.png from the analysis (``a``, ``meta``, ``t``: an
+    :class:`orchestrator.results.analysis.Analysis`'s ``arrays``, ``meta`` and ``scalars``)."""
+    from track.post import BodyResponse
+
+    rail_name, sl_name = meta["crossing_rail"], f"sleeper_{meta['transition_sleeper']}"
+    plots.save(plots.plot_envelopes(a["rail_x"], np.stack([a["rail_M_min"], a["rail_M_max"]]),
+                                    a["sleeper_y"], np.stack([a["sleeper_M_min"], a["sleeper_M_max"]]),
+                                    a["ballast_y"], a["ballast_p_max"], rail_name, sl_name),
+               out_dir / "envelopes.png")
+    inst_r = {f"t = {t['time_max_rail_moment']:.4f} s (max rail moment)":
+              BodyResponse(coord=a["rail_x"], w=a["rail_w_at_max"], moment=a["rail_M_at_max"])}
+    inst_s = {f"t = {t['time_max_sleeper_moment']:.4f} s (max sleeper moment)":
+              BodyResponse(coord=a["sleeper_y"], w=a["sleeper_w_at_max"], moment=a["sleeper_M_at_max"])}
+    plots.save(plots.plot_body_lines(inst_r, inst_s, f"{name}: instants of maximum moment",
+                                     rail_name, f"{sl_name} (crossing transition)",
+                                     marks_rail=[a["x_transition"][0]],
+                                     marks_sleeper=list(a["wheel_y"])), out_dir / "moments.png")
+
+
+def contact_path(out_dir: Path, lay, res, geometry: dict) -> None:
+    """contact_path.png: the first wheel at the nose, its contact path and vertical trajectory."""
+    i = ["left", "right"].index(lay.crossing_side)      # wheels alternate left, right from the front
+    fig = plots.plot_contact_path(res.x[:, i], geometry["eta"][:, i], res.z[:, i], res.parts[:, i], lay.x_tcp,
+                                  f"wheel {i + 1}")
+    plots.save(fig, out_dir / "contact_path.png")
+
+
+def signals(out_dir: Path, name: str, lay, res) -> None:
+    """layout.png, contact_forces.png and displacements.png (wheels and the rail under them)."""
+    wheels = range(res.Fz.shape[1])
+    plots.save(plot_layout(lay), out_dir / "layout.png")
+    plots.save(plots.plot_time_series(res.t, {f"wheel {i + 1}": 1e-3 * res.Fz[:, i] for i in wheels},
+                                      "contact force [kN]", f"{name}: wheel-rail contact forces"),
+               out_dir / "contact_forces.png")
+    series = {f"wheel {i + 1}": 1e3 * res.z[:, i] for i in wheels}
+    series.update({f"rail under wheel {i + 1}": 1e3 * res.rail_z[:, i] for i in wheels})
+    plots.save(plots.plot_time_series(res.t, series, "vertical displacement [mm]",
+                                      f"{name}: wheel and rail displacement"), out_dir / "displacements.png")

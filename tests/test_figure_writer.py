@@ -1,0 +1,39 @@
+"""The figure process of `turnout run` (orchestrator.results.figure_writer): figures drawn by a second
+process land where the in-process path puts them; a figure that fails is reported, never raised, so the
+results written before it stay."""
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from orchestrator.results import run_figures
+from orchestrator.results.figure_writer import FigureWriter
+
+
+def _signals(n=200, m=2):
+    t = np.linspace(0.0, 0.02, n)
+    z = 1e-4 * np.sin(200 * t)[:, None] * np.ones(m)
+    return SimpleNamespace(t=t, x=np.outer(t, np.ones(m)), z=z, Fz=1e5 + 1e4 * z, rail_z=0.5 * z,
+                           parts=np.zeros((n, m, 2)))
+
+
+@pytest.fixture(scope="module")
+def layout():
+    from track.layout import build_layout
+    from track.params import LayoutParams
+    return build_layout(LayoutParams())
+
+
+@pytest.mark.parametrize("background", [True, False])
+def test_figures_are_written_and_failures_reported(tmp_path, layout, background):
+    """Three figures land in the folder; a figure whose folder does not exist comes back as one line
+    naming it (FileNotFoundError), and close() returns normally."""
+    w = FigureWriter(background=background)
+    assert w.background is background
+    w.submit("signals", run_figures.signals, tmp_path, "test", layout, _signals())
+    w.submit("broken", run_figures.signals, tmp_path / "missing" / "folder", "test", layout, _signals())
+    failed = w.close()
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == ["contact_forces.png", "displacements.png", "layout.png"]
+    assert len(failed) == 1 and failed[0].startswith("broken: ") and "No such file" in failed[0], failed
+    # the figure process's own peak memory is reported (it is not the main process's)
+    assert (w.peak_rss_mb is not None and w.peak_rss_mb > 20.0) if background else w.peak_rss_mb is None
