@@ -74,6 +74,23 @@ def test_a_void_of_zero_gaps_removes_the_entry_and_pads_keep_theirs(default_scen
     assert pad.apply(raw, 21, [1.0])["track"]["rail_pad"]["overrides"] == [{"sleeper": 21, "stiffness_scale": 1.0}]
 
 
+def test_void_screening_proxies_are_the_uniform_gap_and_the_two_one_sided_wedges(default_scenario_dict):
+    """A void is screened as a uniform gap (its grid) and as the wedges with 0 at one end and the
+    magnitude at the other (orchestrator.inputs.causes.VOID_SHAPES); a scalar cause has the uniform
+    proxy only. apply_scalar with a profile writes magnitude x profile."""
+    raw = _raw(default_scenario_dict)
+    void = CATALOGUE["ballast_void"]
+    proxies = void.screen_proxies()
+    assert proxies[0][0].tolist() == [1.0] * 6 and proxies[0][1] == void.grid
+    ends = sorted((float(p[0]), float(p[-1])) for p, _ in proxies[1:])
+    assert ends == [(0.0, 1.0), (1.0, 0.0)]
+    for p, _ in proxies[1:]:
+        assert np.all(np.diff(p) != 0) and np.all(np.sign(np.diff(p)) == np.sign(p[-1] - p[0]))   # monotonic
+    gaps = void.apply_scalar(raw, 21, 2e-3, proxies[1][0])["track"]["ballast"]["voids"][0]["gaps"]
+    assert np.allclose(gaps, 2e-3 * proxies[1][0])
+    assert [p.tolist() for p, _ in CATALOGUE["ballast_stiffness"].screen_proxies()] == [[1.0]]
+
+
 def test_scope_is_checked():
     with pytest.raises(ValueError, match="needs a sleeper"):
         CATALOGUE["ballast_void"].site(None)

@@ -10,7 +10,7 @@ cause is one :data:`CATALOGUE` entry (plus its draw in :data:`DRAWS`) and its te
 cause                  where    parameters (bounds)                          scenario keys
 =====================  =======  ===========================================  =====================
 ``ballast_void``       sleeper  ``gaps``: 6 gap heights along the sleeper,   ``track.ballast.voids``
-                                0-4 mm (screened with one uniform gap)
+                                0-4 mm (screened as a uniform gap and the two one-sided wedges)
 ``ballast_stiffness``  global   ``stiffness_scale`` h1, 0.2-5 (log)           ``track.ballast.stiffness_scale``
 ``rail_pad_stiffness`` global   ``stiffness_scale`` h2, 0.1-10 (log)          ``track.rail_pad.stiffness_scale``
 ``rail_pad_stiffness`` sleeper  ``stiffness_scale`` of that sleeper's pads,  ``track.rail_pad.overrides``
@@ -62,6 +62,13 @@ from orchestrator.inputs import keypath
 
 N_GAPS = 6          # void gap points along a sleeper (DESIGN.md §4.2)
 GAP_MAX = 4e-3      # m
+# Screening proxies of a void besides the uniform gap (CauseKind.shapes): a void under one end
+# of a sleeper tilts it on the bed, which a uniform gap (the sleeper hanging) does not resemble: a
+# one-sided void of 2.3 mm at an instrumented sleeper, screened only as a uniform gap, reduced J
+# by 2 % and was never fitted (benchmarks/RESULTS.md, field-like passages, void_sensor). Each
+# wedge at two peak magnitudes (with the nominal 0, three points for the dense search): 4 runs a sleeper.
+VOID_SHAPES = (((1.0, 0.8, 0.6, 0.4, 0.2, 0.0), (1.0e-3, 2.5e-3)),
+               ((0.0, 0.2, 0.4, 0.6, 0.8, 1.0), (1.0e-3, 2.5e-3)))
 
 
 # ------------------------------------------------------------------------------------ sites
@@ -281,6 +288,11 @@ class CauseKind:
         A track property fitted with the nuisance parameters before any cause and never
         screened as one (the track's damping: known only roughly, its effect broad and
         small, it would soak up any misfit).
+    shapes : tuple of (tuple of float, tuple of float)
+        Further screening proxies of a vector cause besides the uniform one: (profile of
+        peak 1 along the vector, its magnitudes). A void is screened as a uniform gap and
+        as the two one-sided wedges (:data:`VOID_SHAPES`); the screening keeps, per
+        candidate, the proxy whose best magnitude fits best.
     """
 
     name: str
@@ -297,6 +309,7 @@ class CauseKind:
     fmu_parameters: dict = field(default_factory=dict)
     category: str = "track"
     nuisance: bool = False
+    shapes: tuple = ()
 
     def __post_init__(self):
         if self.category not in CATEGORIES:
@@ -326,9 +339,13 @@ class CauseKind:
         """The parameter vector the nominal scenario has (the 'no effect' point)."""
         return self.site(sleeper).nominal(raw, sleeper, len(self.names))
 
-    def scalar_to_vector(self, value: float) -> np.ndarray:
-        """The parameter vector of a screening magnitude (a uniform gap for voids)."""
-        return np.full(len(self.names), value)
+    def screen_proxies(self) -> list[tuple[np.ndarray, tuple]]:
+        """The screening proxies: (profile of peak 1, magnitudes), the uniform one (:attr:`grid`) first."""
+        return [(np.ones(len(self.names)), self.grid)] + [(np.asarray(p, float), g) for p, g in self.shapes]
+
+    def scalar_to_vector(self, value: float, profile: np.ndarray | None = None) -> np.ndarray:
+        """The parameter vector of a screening magnitude: ``value`` times ``profile`` (default uniform)."""
+        return np.full(len(self.names), value) if profile is None else value * np.asarray(profile, float)
 
     def apply(self, raw: dict, sleeper: int | None, values) -> dict:
         """A copy of the raw scenario with this cause set to ``values``."""
@@ -336,8 +353,8 @@ class CauseKind:
         self.site(sleeper).apply(raw, sleeper, np.asarray(values, float))
         return raw
 
-    def apply_scalar(self, raw: dict, sleeper: int | None, value: float) -> dict:
-        return self.apply(raw, sleeper, self.scalar_to_vector(value))
+    def apply_scalar(self, raw: dict, sleeper: int | None, value: float, profile: np.ndarray | None = None) -> dict:
+        return self.apply(raw, sleeper, self.scalar_to_vector(value, profile))
 
     def parameters(self, values) -> dict:
         """JSON-able parameters (``{"gaps": [...]}``, ``{"stiffness_scale": s}``, ...)."""
@@ -366,7 +383,7 @@ class CauseKind:
 
 CATALOGUE: dict[str, CauseKind] = {k.name: k for k in (
     CauseKind("ballast_void", True, ("gaps",) * N_GAPS, (0.0,) * N_GAPS, (GAP_MAX,) * N_GAPS, False,
-              (0.4e-3, 1.0e-3, 2.0e-3, 3.5e-3),
+              (0.4e-3, 1.0e-3, 2.0e-3, 3.5e-3), shapes=VOID_SHAPES,
               local_site=SleeperListSite("track.ballast.voids", "gaps", 0.0, vector=True, drop_at_default=True,
                                          lower_clip=0.0),
               unit="m", aliases={"local": "gaps"},

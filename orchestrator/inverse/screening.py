@@ -119,14 +119,14 @@ class Pool:
         return out
 
 
-def scalar_axis(kind, raw: dict, sleeper) -> tuple[np.ndarray, float]:
-    """Screening magnitudes with the nominal one, sorted, and the nominal magnitude.
+def scalar_axis(kind, raw: dict, sleeper, grid: tuple | None = None) -> tuple[np.ndarray, float]:
+    """Screening magnitudes (``grid``, default the kind's) with the nominal one, sorted, and the nominal magnitude.
 
     The nominal magnitude of a vector cause (the 6 void gaps) is its largest entry; of a
     scalar cause, its value.
     """
     nominal = float(np.max(kind.nominal(raw, sleeper)))
-    grid = sorted(set([nominal] + [g for g in kind.grid if abs(g - nominal) > 1e-12]))
+    grid = sorted(set([nominal] + [g for g in (kind.grid if grid is None else grid) if abs(g - nominal) > 1e-12]))
     return np.array(grid, float), nominal
 
 

@@ -4,12 +4,14 @@ A round works on a *reference* model — the nominal scenario (with its nuisance
 estimates) for the first cause, the model extended by the causes named so far for the
 next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of candidates:
 
-1. :func:`_screen`: every candidate at the magnitudes of its screening grid (one batch);
+1. :func:`_screen`: every candidate at the magnitudes of its screening grid (one batch),
+   a void also as the two one-sided wedges (its :meth:`~orchestrator.inputs.causes.CauseKind.screen_proxies`);
 2. :func:`_search`: each candidate's best magnitude by the dense 1-D search between its
-   screening runs (:func:`orchestrator.inverse.screening.dense_search`, no runs);
+   screening runs (:func:`orchestrator.inverse.screening.dense_search`, no runs), of its
+   best-fitting proxy;
 3. :func:`_confirm`: the :data:`CONFIRM` best re-run at their best magnitude;
 4. :func:`_coarse_fits`, :func:`_fine_fits`: bounded least squares (:class:`CauseFitter`;
-   a void first as a wedge, :func:`cause_stages`, started from its screened uniform gap
+   a void first as a wedge, :func:`cause_stages`, started from its screened profile (uniform gap or wedge)
    or a one-sided wedge, whichever fits better), all parameters of the best and of
    up to :data:`FIT` - 1 runners-up within a chi-square factor :data:`FIT_RATIO`;
 5. :func:`_rank`: the fitted and confirmed candidates by their BIC on the effective
@@ -169,7 +171,8 @@ class Round:
     fitters : dict
         Candidate -> its :class:`CauseFitter` (its runs, for the intervals).
     screened : dict
-        Candidate -> magnitude -> signals on the measured base (:func:`_screen`).
+        Candidate -> magnitude -> signals on the measured base (:func:`_screen`; of the
+        candidate's best-fitting screening proxy).
     """
 
     reference: Evaluated
@@ -182,30 +185,40 @@ class Round:
     screened: dict = field(default_factory=dict)
 
 
+def _axes(kind, raw: dict, sleeper) -> list[tuple[np.ndarray | None, np.ndarray, float]]:
+    """The screening proxies of a candidate: (profile, or None for the uniform one; magnitudes; nominal)."""
+    return [(None if i == 0 else prof, *scalar_axis(kind, raw, sleeper, grid))
+            for i, (prof, grid) in enumerate(kind.screen_proxies())]
+
+
 def _screen(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, axes: dict) -> dict:
-    """Step 2, runs: candidate -> magnitude -> signals on the measured base (failed variants left out)."""
-    jobs = [(c, x) for c in cands for x in axes[c][0] if abs(x - axes[c][1]) > 1e-12]
-    runs = pool.map([kind_of(c).apply_scalar(raw, c.sleeper, x) for c, x in jobs])
-    screened = {c: {axes[c][1]: ref.cmp.simulated} for c in cands}
-    for (c, x), run in zip(jobs, runs):
+    """Step 2, runs: candidate -> per proxy, magnitude -> signals on the measured base (failed variants left out)."""
+    jobs = [(c, i, x) for c in cands for i, (_, xs, x0) in enumerate(axes[c]) for x in xs if abs(x - x0) > 1e-12]
+    runs = pool.map([kind_of(c).apply_scalar(raw, c.sleeper, x, axes[c][i][0]) for c, i, x in jobs])
+    screened = {c: [{x0: ref.cmp.simulated} for _, _, x0 in axes[c]] for c in cands}
+    for (c, i, x), run in zip(jobs, runs):
         cmp, why = checked_comparison(target, run, ref.cmp)
         if cmp is None:
-            pool.drop(f"{c.label} at {x:.6g}", "screening", why)
+            pool.drop(f"{c.label} at {x:.6g}" + ("" if i == 0 else f" (screening shape {i})"), "screening", why)
         else:
-            screened[c][x] = cmp.simulated
+            screened[c][i][x] = cmp.simulated
     return screened
 
 
-def _search(target: Target, cands: list, screened: dict) -> dict:
-    """Step 2, no runs: candidate -> its ``screened`` evaluation (candidates with < 2 magnitudes left out)."""
-    dense = {}
+def _search(target: Target, cands: list, axes: dict, screened: dict) -> tuple[dict, dict]:
+    """Step 2, no runs: candidate -> its ``screened`` evaluation at the best magnitude of its best-fitting
+    proxy, and candidate -> that proxy's magnitude -> signals (candidates with < 2 magnitudes left out)."""
+    dense, grids = {}, {}
     for c in cands:
-        xs = np.array(sorted(screened[c]))
-        if xs.size < 2:
-            continue
-        x_best, cmp = dense_search(target, kind_of(c), xs, [screened[c][x] for x in xs])
-        dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best), cmp, 1, "screened")
-    return dense
+        for (profile, _, _), grid in zip(axes[c], screened[c]):
+            xs = np.array(sorted(grid))
+            if xs.size < 2:
+                continue
+            x_best, cmp = dense_search(target, kind_of(c), xs, [grid[x] for x in xs])
+            if c not in dense or cmp.chi2 < dense[c].cmp.chi2:
+                dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best, profile), cmp, 1, "screened")
+                grids[c] = grid
+    return dense, grids
 
 
 def _confirm(pool: Pool, target: Target, raw: dict, ref: Evaluated, dense: dict, confirm: int) -> dict:
@@ -267,14 +280,14 @@ def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, ca
     ``confirm``: how many of the screened candidates are re-run and fitted (the later
     rounds of forward selection confirm fewer: they screen only a few).
     """
-    axes = {c: scalar_axis(kind_of(c), raw, c.sleeper) for c in cands}
-    pool.expect(sum(len(axes[c][0]) - 1 for c in cands))
+    axes = {c: _axes(kind_of(c), raw, c.sleeper) for c in cands}
+    pool.expect(sum(len(xs) - 1 for c in cands for _, xs, _ in axes[c]))
     screened = _screen(pool, target, raw, ref, cands, axes)
-    dense = _search(target, cands, screened)
+    dense, grids = _search(target, cands, axes, screened)
     confirmed = _confirm(pool, target, raw, ref, dense, confirm)
     fitted, fitters = _fits(pool, target, raw, ref, confirmed)
     rd = _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)
-    rd.screened = screened
+    rd.screened = grids
     return rd
 
 
