@@ -78,11 +78,14 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
         columns = None if save_states else merge_columns(analysis_columns(model), sensor_columns(model, compiled))
         res = _cosimulate(scenario, out_dir, progress, backend, columns)
         t_post = time.perf_counter()
+        sig = run_figures.plotted_signals(res)   # drawn while the main process post-processes
+        figures.submit("layout.png, contact_forces.png, displacements.png", run_figures.signals, out_dir,
+                       scenario.name, model.layout, sig)
         summary, sensors, an, geometry = _post_process(scenario, backend, model, compiled, res)
         states = _states_to_save(res.track_record) if save_states else None
         res.track_record = None  # post-processed: what is not asked for is not kept
         t_write = time.perf_counter()
-        _submit_figures(figures, out_dir, scenario.name, model.layout, res, an, geometry)
+        _submit_analysis_figures(figures, out_dir, scenario.name, model.layout, sig, an, geometry)
         # ---- signals first: nothing computed is lost if a later step fails
         _write_signals(out_dir, res, sensors)
         _write_h5(out_dir / "results.h5", res, sensors, an, states, geometry)
@@ -121,14 +124,12 @@ def _post_process(scenario, backend: str, model, compiled, res) -> tuple[dict, d
     return summary, sensors, an, geometry
 
 
-def _submit_figures(figures: FigureWriter, out_dir: Path, name: str, lay, res, an, geometry: dict | None) -> None:
-    """Hand the run's figures to ``figures`` (drawn while the main process writes the results)."""
-    sig = run_figures.plotted_signals(res)
-    meta = getattr(an, "meta", None)
-    if meta is not None:
-        figures.submit("envelopes.png, moments.png", run_figures.track_results, out_dir, name, an.arrays, meta,
-                       an.scalars)
-    figures.submit("layout.png, contact_forces.png, displacements.png", run_figures.signals, out_dir, name, lay, sig)
+def _submit_analysis_figures(figures: FigureWriter, out_dir: Path, name: str, lay, sig, an,
+                             geometry: dict | None) -> None:
+    """Hand the figures of the analysis to ``figures`` (drawn while the main process writes the results)."""
+    if getattr(an, "meta", None) is not None:
+        figures.submit("envelopes.png, moments.png", run_figures.track_results, out_dir, name,
+                       *run_figures.plotted_analysis(an))
     if geometry is not None and lay.x_tcp is not None:
         figures.submit("contact_path.png", run_figures.contact_path, out_dir, lay, sig, geometry)
 

@@ -17,11 +17,24 @@ from orchestrator.results import plots
 from orchestrator.results.plots_layout import plot_layout
 
 SIGNALS = ("t", "x", "z", "Fz", "rail_z", "parts")
+# what track_results reads of an Analysis: only these go to the figure process (its meta also holds
+# the whole histories and the loads with their rail points, which would drag the model along)
+TRACK_ARRAYS = ("rail_x", "rail_M_min", "rail_M_max", "rail_w_at_max", "rail_M_at_max", "sleeper_y",
+                "sleeper_M_min", "sleeper_M_max", "sleeper_w_at_max", "sleeper_M_at_max", "ballast_y",
+                "ballast_p_max", "x_transition", "wheel_y")
+TRACK_META = ("crossing_rail", "transition_sleeper")
+TRACK_SCALARS = ("time_max_rail_moment", "time_max_sleeper_moment")
 
 
 def plotted_signals(res) -> SimpleNamespace:
     """The arrays of ``res`` the figures read (what is sent to the figure process)."""
     return SimpleNamespace(**{k: getattr(res, k) for k in SIGNALS})
+
+
+def plotted_analysis(an) -> tuple[dict, dict, dict]:
+    """``(arrays, meta, scalars)`` of an Analysis as :func:`track_results` reads them, nothing more."""
+    return ({k: an.arrays[k] for k in TRACK_ARRAYS}, {k: an.meta[k] for k in TRACK_META},
+            {k: an.scalars[k] for k in TRACK_SCALARS})
 
 
 def track_results(out_dir: Path, name: str, a: dict, meta: dict, t: dict) -> None:
