@@ -3,10 +3,11 @@
 - vehicle: input contact forces ``Fz`` (up +) -> outputs wheel ``x``, ``z`` (up +), ``vz``;
 - track: inputs wheel ``x``, ``z``, ``vz`` -> outputs contact forces ``Fz``.
 
-The coupling values (the vehicle's ``outputs()``, the track's ``forces()``) are arrays
-the caller owns: a later ``step`` of the unit does not change them (the Jacobi master reads
-the vehicle's outputs at ``t_k``, steps the vehicle, then hands those ``t_k`` values to the
-track). The track's ``outputs()`` are for recording at once.
+The coupling values (the vehicle's ``outputs()``, the track's ``forces()``) are arrays a
+later ``step`` of the unit does not change (the Jacobi master reads the vehicle's outputs at
+``t_k``, steps the vehicle, then hands those ``t_k`` values to the track). A unit reads its
+outputs once per communication point and hands the same arrays to every caller until its next
+step: read them, do not modify them. The track's ``outputs()`` are for recording at once.
 
 ``InProcessVehicle`` / ``InProcessTrack`` step the model objects directly
 (``vehicle.VehicleStepper``, ``track.cosim.TrackCosim``); ``FmuVehicle`` / ``FmuTrack``
