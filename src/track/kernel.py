@@ -46,8 +46,8 @@ column by column (the targets within a column are distinct), the forward sweep o
 ``L y = b`` column by column (``y_j`` is final when column j's entries come: all
 its updates come from columns < j) and the backward sweep of ``L^T z = y`` row by
 row from the last (``z_i`` is final when row i's entries come: its updates come
-from rows > i). Measured on the 64-sleeper panel: solve 77 -> 59 us, K product
-30 -> 20 us (benchmarks/bench_step.py).
+from rows > i). Measured on the 64-sleeper panel's matrices, old and new loops in one
+script: solve 77 -> 59 us, K product 30 -> 20 us (benchmarks/RESULTS.md, 2026-11-25).
 
 Round-off entries. The Craig–Bampton products ``T^T K T`` leave entries that are
 zero in exact arithmetic (the constraint modes are K-orthogonal to the
