@@ -35,5 +35,7 @@ def test_figures_are_written_and_failures_reported(tmp_path, layout, background)
     failed = w.close()
     assert sorted(p.name for p in tmp_path.glob("*.png")) == ["contact_forces.png", "displacements.png", "layout.png"]
     assert len(failed) == 1 and failed[0].startswith("broken: ") and "No such file" in failed[0], failed
-    # the figure process's own peak memory is reported (it is not the main process's)
-    assert (w.peak_rss_mb is not None and w.peak_rss_mb > 20.0) if background else w.peak_rss_mb is None
+    # the figure process's own peak memory is reported (it is not the main process's); 20 MB is a floor
+    # no Python process that has imported numpy and matplotlib stays under (measured ~150 MB), so a
+    # value read from the wrong place (kB taken as MB would be ~1e5, bytes ~1e8) or a zero fails
+    assert (w.peak_rss_mb is not None and 20.0 < w.peak_rss_mb < 5000.0) if background else w.peak_rss_mb is None

@@ -43,6 +43,7 @@ def _peak_rss_mb() -> float:
 
 
 def _cores() -> int:
+    """Cores this process may run on (as ``orchestrator.sweeps.workers.default_workers``, a layer above)."""
     try:
         return len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # no affinity masks (macOS, Windows)

@@ -310,18 +310,17 @@ def ldl_solve_many(perm, Ls, Ld, Lx, d, B, X, work):
     for i in range(n):
         for c in range(k):
             work[i, c] = B[perm[i], c]
-    for p in range(Lx.size):
-        if p == half:
-            for j in range(n):
-                for c in range(k):
-                    work[j, c] /= d[j]
+    for p in range(half):                    # L Y = P B, by columns
         s, t, l = Ls[p], Ld[p], Lx[p]
         for c in range(k):
             work[t, c] -= l * work[s, c]
-    if half == 0:
-        for j in range(n):
-            for c in range(k):
-                work[j, c] /= d[j]
+    for j in range(n):
+        for c in range(k):
+            work[j, c] /= d[j]
+    for p in range(half, Lx.size):           # L^T Z = D^-1 Y, by rows from the last
+        s, t, l = Ls[p], Ld[p], Lx[p]
+        for c in range(k):
+            work[t, c] -= l * work[s, c]
     for i in range(n):
         for c in range(k):
             X[perm[i], c] = work[i, c]
