@@ -265,7 +265,9 @@ def run_case(sc, setup: tuple, family: str, seed: int, workers: int, folder: Pat
     sleepers, channels = setup
     case = draw_case(seed, family, sleepers, channels, sc.vehicle.fmu)
     folder.mkdir(parents=True, exist_ok=True)
-    if stage in ("all", "synth"):
+    written = (folder / "passage.csv").is_file() and (folder / "case.json").is_file() and json.loads(
+        (folder / "case.json").read_text()) == json.loads(json.dumps(case.as_dict()))
+    if stage == "synth" or (stage == "all" and not written):   # `all` keeps a passage written for this very case
         synthesize_case(sc, case, folder / "passage.csv")
         (folder / "case.json").write_text(json.dumps(case.as_dict(), indent=1))
     if stage == "synth":
