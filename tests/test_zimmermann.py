@@ -140,3 +140,31 @@ def test_shear_and_sleeper_flexibility_increase_deflection():
         st = static_equilibrium(m, loads)
         out.append(-(loads[0][0].value(st.q, -Q) - loads[0][0].value(ref.q)))
     assert 1.03 < out[1] / out[0] < 1.4, out  # shear (~7 %) + sleeper bending (~10 %)
+
+
+def test_moment_history_is_the_per_step_moment():
+    """Consistency check (two code paths of ours): the moment history of the post-processing
+    (``body_response_history``: the static correction as one matrix per body, every step and
+    wheel at once) equals ``body_response`` with point maps step by step — the path the
+    Zimmermann test above verifies. Loads on another body (NaN) are left out, as there.
+    Tolerance: round-off of sums of ~1e5 N m terms in another order (1e-9 relative)."""
+    from track.post import body_response_history
+
+    model, lay = euler_limit_track(120e6)
+    rng = np.random.default_rng(3)
+    x0 = lay.sleepers[N_SLEEPERS // 2].x
+    nt = 6
+    xs = x0 + rng.uniform(-1.5, 1.5, (nt, 2))
+    xs[2, 1] = np.nan                                          # that wheel on another body at step 2
+    F = -rng.uniform(5e4, 1.5e5, (nt, 2))
+    q = rng.normal(0.0, 1e-4, (nt, model.n))
+    hist = body_response_history(model, "rail_left", q, xs, F)
+    for t in range(nt):
+        loads = [(model.point("rail_left", x), f) for x, f in zip(xs[t], F[t]) if np.isfinite(x)]
+        step = body_response(model, "rail_left", q[t], loads)
+        scale = np.abs(step.moment).max()
+        assert np.abs(hist.moment[t] - step.moment).max() <= 1e-9 * scale, t
+        assert np.abs(hist.w[t] - step.w).max() <= 1e-9 * np.abs(step.w).max(), t
+    # the correction is there: without the loads the moment differs (the test can fail)
+    bare = body_response(model, "rail_left", q[0])
+    assert np.abs(hist.moment[0] - bare.moment).max() > 1e-3 * np.abs(bare.moment).max()

@@ -24,10 +24,11 @@ import numpy as np
 
 from track.cosim import state_rows
 from track.model import TrackModel, reference_point
-from track.post import BodyResponse, body_response, sleeper_pressure
+from track.post import BodyResponse, body_response, body_response_history, sleeper_pressure
 
 SIDE_WINDOW = 0.3   # m: half-width of the sleeper region under a rail seat for the side pressures
-STATE_BLOCK = 500   # output steps per block of full-width states (bounds the temporaries: 7 MB each)
+STATE_BLOCK = 128   # output steps per block of full-width states (bounds the temporaries: 1.8 MB each for 1741
+                    # dofs; 500 made the run's peak memory about 35 MB higher)
 
 
 @dataclass
@@ -92,23 +93,32 @@ def analysis_columns(model: TrackModel) -> dict:
     return {"q": np.union1d(np.union1d(rail.gdofs, sleeper.gdofs), D), "v": D}
 
 
-def _histories(model: TrackModel, rec: dict, rail_name: str, k_tr: int, loads_t: list):
+def _histories(model: TrackModel, rec: dict, rail_name: str, k_tr: int, load_x: np.ndarray):
     """Moment history along the rail (nt, nn), the sleeper's response and its ballast pressures
-    (y [m], p (nt, nb) [Pa]) from the record, a block of :data:`STATE_BLOCK` rows at a time."""
+    (y [m], p (nt, nb) [Pa]) from the record, a block of :data:`STATE_BLOCK` rows at a time;
+    ``load_x``: the wheels' x on the rail, NaN where a wheel is on another body (:func:`_on_rail`)."""
     n, nt = model.n, len(rec["t"])
-    rail_hist, sl_w, sl_M, p_t = [], [], [], []
+    rail_M, sl_w, sl_M, p_t = [], [], [], []
     y_p = sl = None
     for b in range(0, nt, STATE_BLOCK):
         rows = slice(b, b + STATE_BLOCK)
         q, v = state_rows(rec, "q", n, rows), state_rows(rec, "v", n, rows)
-        rail_hist += [body_response(model, rail_name, qi, pts).moment for qi, pts in zip(q, loads_t[rows])]
+        rail_M.append(body_response_history(model, rail_name, q, load_x[rows], -rec["Fz"][rows]).moment)
         sl = body_response(model, f"sleeper_{k_tr}", q)
         sl_w.append(sl.w)
         sl_M.append(sl.moment)
         y_p, p = sleeper_pressure(model, k_tr, q, v)
         p_t.append(p)
     sleeper = BodyResponse(coord=sl.coord, w=np.concatenate(sl_w), moment=np.concatenate(sl_M))
-    return np.array(rail_hist), sleeper, y_p, np.concatenate(p_t)
+    return np.concatenate(rail_M), sleeper, y_p, np.concatenate(p_t)
+
+
+def _on_rail(model: TrackModel, rail_name: str, sides: list[str], xs: np.ndarray) -> np.ndarray:
+    """The wheels' x (nt, m) where each runs on ``rail_name``, NaN where on another body."""
+    lay = model.layout
+    on = np.array([[lay.running_body(sd, x) == rail_name for sd, x in zip(sides, row)] for row in xs.tolist()],
+                  dtype=bool).reshape(xs.shape)
+    return np.where(on, xs, np.nan)
 
 
 def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
@@ -130,9 +140,8 @@ def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
         return out
     lay = model.layout
     rail_name = lay.running_body(side, x_ref)
-    loads_t = [[(model.rail_point(sd, x), -f) for sd, x, f in zip(sides, xs, fz)]
-               for xs, fz in zip(rec["x"], rec["Fz"])]
-    rail_hist, sl, y_p, p_t = _histories(model, rec, rail_name, k_tr, loads_t)
+    load_x = _on_rail(model, rail_name, sides, np.asarray(rec["x"], float))
+    rail_hist, sl, y_p, p_t = _histories(model, rec, rail_name, k_tr, load_x)
     j_r, j_s = int(np.argmax(rail_hist.max(axis=1))), int(np.argmax(sl.moment.max(axis=1)))
     y_cross, y_field = seat_y(model, k_tr, side), seat_y(model, k_tr, "right" if side == "left" else "left")
     near_c, near_f = side_region(y_p, y_cross), side_region(y_p, y_field)
@@ -146,10 +155,11 @@ def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
         "ballast_pressure_crossing_side_at_max_sleeper": float(p_t[j_s, near_c].max()),
         "ballast_pressure_field_side_at_max_sleeper": float(p_t[j_s, near_f].max()),
     })
-    rail_at = body_response(model, rail_name, state_rows(rec, "q", model.n, slice(j_r, j_r + 1))[0], loads_t[j_r])
+    rail_at = body_response_history(model, rail_name, state_rows(rec, "q", model.n, slice(j_r, j_r + 1)),
+                                    load_x[j_r:j_r + 1], -rec["Fz"][j_r:j_r + 1])
     a = out.arrays
     a.update({
-        "rail_x": rail_at.coord, "rail_w_at_max": rail_at.w, "rail_M_at_max": rail_at.moment,
+        "rail_x": rail_at.coord, "rail_w_at_max": rail_at.w[0], "rail_M_at_max": rail_at.moment[0],
         "rail_M_min": rail_hist.min(axis=0), "rail_M_max": rail_hist.max(axis=0),
         "sleeper_y": sl.coord, "sleeper_w_at_max": sl.w[j_s], "sleeper_M_at_max": sl.moment[j_s],
         "sleeper_M_min": sl.moment.min(axis=0), "sleeper_M_max": sl.moment.max(axis=0),
@@ -157,7 +167,7 @@ def analyse(model: TrackModel, static_wheel_load: float, res) -> Analysis:
         "wheel_y": np.array([y_cross, y_field]), "x_transition": np.array([x_ref]),
     })
     out.meta = {"crossing_rail": rail_name, "transition_sleeper": k_tr, "crossing_side": side,
-                "j_rail": j_r, "j_sleeper": j_s, "loads_t": loads_t, "rail_hist": rail_hist, "sleeper": sl,
+                "j_rail": j_r, "j_sleeper": j_s, "rail_hist": rail_hist, "sleeper": sl,
                 "y_p": y_p, "p_t": p_t}
     return out
 

@@ -96,6 +96,15 @@ class BeamBody:
         xi = min(max((s - sl[e]) / L, 0.0), 1.0)
         return e, deflection_shape(xi, L, self._phi_list[e])
 
+    def shape_rows(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`shape_row` for an array of coordinates ``s`` [m], shape (k,): elements (k,) and
+        weights (k, 4)."""
+        s = np.asarray(s, dtype=float)
+        e = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.s.size - 2)
+        L = self.s[e + 1] - self.s[e]
+        xi = np.clip((s - self.s[e]) / L, 0.0, 1.0)
+        return e, deflection_shape(xi, L, self.phi[e]).reshape(s.size, 4)
+
     def rotation_row(self, s: float) -> tuple[int, np.ndarray]:
         """Section rotation at ``s`` [m] as weights on the dofs of one element.
 

@@ -10,8 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from .model import TrackModel
+from .reduction import static_correction
 
 
 @dataclass
@@ -48,6 +50,42 @@ def body_response(model: TrackModel, body: str, q: np.ndarray, loads=()) -> Body
         qb = np.asarray(q)[..., b.gdofs]
         return BodyResponse(coord=b.coords(), w=qb @ b.fom.W.T, moment=qb @ b.fom.Mom.T)
     u = model.full_field(body, q, loads)
+    return BodyResponse(coord=b.coords(), w=u[..., 0::2], moment=b.fom.nodal_moments(u))
+
+
+def body_response_history(model: TrackModel, body: str, q: np.ndarray, load_x: np.ndarray,
+                          load_f: np.ndarray) -> BodyResponse:
+    """:func:`body_response` along ``body`` for a history of states and point loads, at once.
+
+    The same quantity as ``body_response(model, body, q[t], loads[t])`` step by step (the
+    static correction of the truncated modes is linear in the load: one matrix per body,
+    ``track.reduction.static_correction`` of unit loads on every dof), without a point map
+    per load and step.
+
+    Parameters
+    ----------
+    q : ndarray, shape (nt, n)
+        Generalized displacements.
+    load_x : ndarray, shape (nt, m)
+        Track coordinate [m] of each point load on ``body``; NaN where the load is on
+        another body at that step.
+    load_f : ndarray, shape (nt, m)
+        Point loads [N], up + (a wheel's contact force enters as ``-Fz``).
+    """
+    b = model.body(body)
+    if b.solid:    # its wheel loads act on retained nodes: no correction (body_response)
+        return body_response(model, body, q)
+    q = np.asarray(q)
+    u = q[:, b.gdofs] @ b.rom.T.T
+    on = np.isfinite(load_x)
+    if on.any():
+        t, i = np.nonzero(on)
+        e, w = b.fom.shape_rows(b.local(load_x[t, i]))
+        # G (nt, ndof): each step's loads on the full dofs (F times the shape weights of its element)
+        G = sp.csr_matrix(((load_f[t, i][:, None] * w).ravel(),
+                           (np.repeat(t, 4), (2 * e[:, None] + np.arange(4)).ravel())), shape=(len(q), b.fom.ndof))
+        S = static_correction(b.rom, np.eye(b.fom.ndof))       # (ndof, ndof): column j, a unit load on dof j
+        u += G @ S.T
     return BodyResponse(coord=b.coords(), w=u[..., 0::2], moment=b.fom.nodal_moments(u))
 
 
