@@ -13,7 +13,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .model import TrackModel
-from .reduction import static_correction
+from .reduction import residual_flexibility
 
 
 @dataclass
@@ -59,8 +59,8 @@ def body_response_history(model: TrackModel, body: str, q: np.ndarray, load_x: n
 
     The same quantity as ``body_response(model, body, q[t], loads[t])`` step by step (the
     static correction of the truncated modes is linear in the load: one matrix per body,
-    ``track.reduction.static_correction`` of unit loads on every dof), without a point map
-    per load and step.
+    ``track.reduction.residual_flexibility``, the correction of a unit load on each dof),
+    without a point map per load and step.
 
     Parameters
     ----------
@@ -84,8 +84,7 @@ def body_response_history(model: TrackModel, body: str, q: np.ndarray, load_x: n
         # G (nt, ndof): each step's loads on the full dofs (F times the shape weights of its element)
         G = sp.csr_matrix(((load_f[t, i][:, None] * w).ravel(),
                            (np.repeat(t, 4), (2 * e[:, None] + np.arange(4)).ravel())), shape=(len(q), b.fom.ndof))
-        S = static_correction(b.rom, np.eye(b.fom.ndof))       # (ndof, ndof): column j, a unit load on dof j
-        u += G @ S.T
+        u += G @ residual_flexibility(b.rom)       # symmetric (ndof, ndof), once per body: column j, a unit load on dof j
     return BodyResponse(coord=b.coords(), w=u[..., 0::2], moment=b.fom.nodal_moments(u))
 
 
