@@ -1,21 +1,49 @@
 """How well a named cause's parameters are determined: 90 % intervals, identifiability, which sensor would pin them.
 
-The interval is Jacobian-based (the linearised least-squares covariance) in the unit
-cube the fit works in (:class:`orchestrator.inverse.selection.CauseFitter`)::
+The interval is the wider of two linearised spreads, both in the unit cube the fit
+works in (:class:`orchestrator.inverse.selection.CauseFitter`):
 
-    Cov(u) = tau * s^2 * (J^T J)^-1,   s^2 = |r|^2 / (N - k),   tau = N / N_eff
+1. **Noise** (the model is right, the residual is correlated noise)::
 
-``r`` are the weighted residuals at the fitted point (their sum of squares is the
-least-squares counterpart of J), ``J`` their forward-difference Jacobian (the fit's own
-step, :data:`orchestrator.inverse.fitting.STEP`), ``s^2`` the residual variance per
-sample (model-form error included: it is estimated, not assumed), and ``tau`` the
-integrated autocorrelation time of the residual (:mod:`orchestrator.inverse.significance`):
-N correlated samples carry the information of N_eff independent ones, so the variance
-of a least-squares estimate grows by N / N_eff (exact for a slowly varying Jacobian).
-The 90 % interval is ``u +- 1.645 sd`` (two-sided normal quantile), clipped to the
+       Cov(u) = tau * s^2 * (J^T J)^-1,   s^2 = |r|^2 / (N - k),   tau = N / N_eff
+
+   ``r`` are the weighted residuals at the fitted point (their sum of squares is the
+   least-squares counterpart of J), ``J`` their forward-difference Jacobian (the fit's own
+   step, :data:`orchestrator.inverse.fitting.STEP`), ``s^2`` the residual variance per
+   sample, and ``tau`` the integrated autocorrelation time of the residual
+   (:mod:`orchestrator.inverse.significance`): N correlated samples carry the information
+   of N_eff independent ones, so the variance of a least-squares estimate grows by
+   N / N_eff (exact for a slowly varying Jacobian). Half-width ``Z90 sd``.
+2. **Sensor groups disagree** (model-form error: field data come from another model —
+   other vehicle, damping, time step, void shape —, so each sensor group's best fit is a
+   different value and the joint fit is a compromise none of them confirms): the
+   delete-one-group jackknife (Efron & Stein 1981; with groups as clusters it is the
+   cluster-robust variance of Cameron & Miller 2015, J. Human Resources 50(2), with the
+   leverage of each group kept) of the refit with one sensor group (A-F) held out — the
+   held-out check the naming rule already makes
+   (:mod:`orchestrator.inverse.significance`), here linearised, so **no runs**::
+
+       u_(-g) = clip(u - (J^T J - J_g^T J_g)^+ (J^T r - J_g^T r_g), 0, 1)
+       Var(u) = (G - 1) / G * sum_g (u_(-g) - u)^2
+
+   (one Gauss-Newton step of the bounded refit without group g from the fit; exact for a
+   linear model; ``^+`` the inverse on the directions the remaining groups see: a
+   direction only group g sees has no refit without it and adds nothing, the noise term
+   then stands). The spread is taken about the fit, not about the jackknife mean: the
+   interval is centred on the fit, and a fit the trust region left short of its optimum
+   (``J^T r != 0``) widens it by the step it did not take. Groups' residuals are
+   independent given the model only if whole groups are the clusters (the channels of a
+   group share their position and model-form error), so G is small (six): the half-width
+   is the Student quantile ``t_{0.95, G-1} sd`` (Cameron & Miller's few-cluster advice).
+
+Each entry's 90 % interval is ``u +- max(Z90 sd_noise, t sd_groups)``: each spread is an
+estimate of the same sampling spread under a different assumption (the model is right /
+the groups are exchangeable), and the interval must hold under either. Clipped to the
 bounds and mapped to the parameter's units (log axis for stiffness factors: the interval
 is then asymmetric in the factor). Directions the data do not see (eigenvalues of
-``J^T J`` below :data:`RCOND` x the largest) get an infinite variance.
+``J^T J`` below :data:`RCOND` x the largest) get an infinite variance. Not included: the
+uncertainty of the nuisance estimates (speed, vehicle, damping, channel gains) the cause
+is fitted on top of — a model-form error all groups share is invisible to both terms.
 
 A parameter is **not identifiable** when its interval covers at least :data:`IDENT_SHARE`
 of its bounds (in the unit cube, i.e. on the log axis for stiffness factors): the data
@@ -52,8 +80,71 @@ def unit_covariance(jac: np.ndarray, r: np.ndarray, n_eff: float) -> np.ndarray:
     return tau * s2 * cov
 
 
-def intervals(candidate, values: np.ndarray, cov_u: np.ndarray) -> dict:
+def group_jackknife(jac: np.ndarray, r: np.ndarray, groups: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, int]:
+    """Delete-one-sensor-group jackknife variance of the fitted unit-cube point (module doc, 2.; no runs).
+
+    Parameters
+    ----------
+    jac : ndarray, shape (n, k)
+        Jacobian of the weighted residuals in the unit cube at ``u``.
+    r : ndarray, shape (n,)
+        The weighted residuals at ``u``.
+    groups : ndarray, shape (n,)
+        Sensor group of each residual entry.
+    u : ndarray, shape (k,)
+        The fitted point (the refits are clipped to ``[0, 1]`` as the bounded refit would be).
+
+    Returns
+    -------
+    (ndarray, int)
+        ``(G - 1) / G * sum_g (u_(-g) - u)^2`` per parameter, and G, the groups holding
+        residual (a variance of zeros when G < 2).
+    """
+    groups = np.asarray(groups)
+    labels = [g for g in dict.fromkeys(groups.tolist()) if np.any(r[groups == g] != 0.0)]
+    if len(labels) < 2:
+        return np.zeros(jac.shape[1]), len(labels)
+    a_all, grad_all = jac.T @ jac, jac.T @ r
+    top = max(float(np.linalg.eigvalsh(a_all).max()), 1e-300)
+    shifts = []
+    for g in labels:
+        m = groups == g
+        lam, vec = np.linalg.eigh(a_all - jac[m].T @ jac[m])
+        inv = np.where(lam > RCOND * top, 1.0 / np.maximum(lam, 1e-300), 0.0)   # unseen without g: no refit
+        step = -((vec * inv) @ vec.T) @ (grad_all - jac[m].T @ r[m])
+        shifts.append(np.clip(u + step, 0.0, 1.0) - u)
+    n_g = len(labels)
+    return (n_g - 1) / n_g * np.sum(np.square(shifts), axis=0), n_g
+
+
+def residual_groups(target, cmp) -> np.ndarray:
+    """The sensor group of each entry of ``target.weighted_residuals(cmp)`` (same channel order and lengths)."""
+    return np.concatenate([np.full(np.asarray(cmp.residuals[k]).size, target.layout.groups[k], dtype=object)
+                           for k in cmp.channels])
+
+
+def half_widths(cov_u: np.ndarray, var_groups: np.ndarray | None = None, n_groups: int = 0) -> dict:
+    """Unit-cube half-widths of the 90 % intervals (module doc): ``max(Z90 sd_noise, t_{0.95,G-1} sd_groups)``.
+
+    Returns
+    -------
+    dict
+        ``{"noise": [...], "sensor_groups": [...] or None, "half": ndarray}`` (the first two as
+        lists, ``inf`` for an unseen direction).
+    """
+    noise = Z90 * np.sqrt(np.maximum(np.diag(cov_u), 0.0))
+    if var_groups is None or n_groups < 2:
+        return {"noise": noise.tolist(), "sensor_groups": None, "half": noise}
+    from scipy.special import stdtrit   # Student-t quantile (scipy.stats costs ~1 s to import)
+
+    grp = float(stdtrit(n_groups - 1, 0.95)) * np.sqrt(np.maximum(var_groups, 0.0))
+    return {"noise": noise.tolist(), "sensor_groups": grp.tolist(), "half": np.maximum(noise, grp)}
+
+
+def intervals(candidate, values: np.ndarray, cov_u: np.ndarray, half: np.ndarray | None = None) -> dict:
     """90 % intervals, identifiability and the pinning sensors of a fitted cause (module doc).
+
+    ``half``: the unit-cube half-widths (:func:`half_widths`); default ``Z90 sd`` of ``cov_u``.
 
     Returns
     -------
@@ -64,8 +155,9 @@ def intervals(candidate, values: np.ndarray, cov_u: np.ndarray) -> dict:
     """
     kind = kind_of(candidate)
     u = np.clip(kind.to_unit(values), 0.0, 1.0)
-    sd = np.sqrt(np.maximum(np.diag(cov_u), 0.0))
-    lo, hi = np.clip(u - Z90 * sd, 0.0, 1.0), np.clip(u + Z90 * sd, 0.0, 1.0)
+    if half is None:
+        half = Z90 * np.sqrt(np.maximum(np.diag(cov_u), 0.0))
+    lo, hi = np.clip(u - half, 0.0, 1.0), np.clip(u + half, 0.0, 1.0)
     lo_v, hi_v = kind.from_unit(lo), kind.from_unit(hi)
     width = hi - lo
     ident = [bool(w < IDENT_SHARE) for w in width]
@@ -89,10 +181,29 @@ def pinning_sensor(candidate, index: int, n_points: int | None = None) -> str:
 
 
 def cause_uncertainty(fitter, values: np.ndarray, n_eff: float) -> dict:
-    """Intervals of a fitted cause from its fitter's runs (a Jacobian at ``values``: up to n more runs)."""
+    """Intervals of a fitted cause from its fitter's runs (a Jacobian at ``values``: up to n more runs).
+
+    Both spreads of the module doc come from the same Jacobian and residual (the sensor
+    groups' one is linearised: no further runs). ``unit_half_width`` reports each
+    (unit cube; ``None`` for an unseen direction, or for the groups' when fewer than two
+    groups hold residual).
+    """
     jac, r = fitter.jacobian(values)
     cov = unit_covariance(jac, r, n_eff * r.size / max(fitter.start.cmp.n, 1))
-    return intervals(fitter.start.candidate, values, cov)
+    u = np.clip(kind_of(fitter.start.candidate).to_unit(values), 0.0, 1.0)
+    cmp = fitter.runs([u])[0]
+    groups = residual_groups(fitter.target, cmp) if cmp is not None else None
+    if groups is not None and groups.size == r.size:
+        var_g, n_g = group_jackknife(jac, r, groups, u)
+    else:   # a failed run at the fit (a penalty residual): no group structure to use
+        var_g, n_g = None, 0
+    hw = half_widths(cov, var_g, n_g)
+    out = intervals(fitter.start.candidate, values, cov, hw["half"])
+    out["unit_half_width"] = {k: None if hw[k] is None else [x if np.isfinite(x) else None for x in hw[k]]
+                              for k in ("noise", "sensor_groups")}
+    out["sensor_groups"] = n_g
+    return out
 
 
-__all__ = ["unit_covariance", "intervals", "pinning_sensor", "cause_uncertainty", "Z90", "IDENT_SHARE", "RCOND"]
+__all__ = ["unit_covariance", "group_jackknife", "residual_groups", "half_widths", "intervals", "pinning_sensor",
+           "cause_uncertainty", "Z90", "IDENT_SHARE", "RCOND"]
