@@ -9,7 +9,11 @@ confirmation runs and the least-squares polish. Printed and appended to
 benchmarks/RESULTS.md: wall time (and the polish's share), runs/s, CV errors, recovered vs
 true parameters (at the surrogate optimum and calibrated), the objective.
 
-Run: python benchmarks/bench_calibrate.py [--out DIR] [--workers 2] [--n1 500] [--n2 500]
+With ``--scaling`` the same calibration runs with 1, 2, ... up to the machine's cores workers,
+and the wall time, speed-up and parallel efficiency T_1 / (N T_N) of each count are printed
+and recorded (issue "Speed and footprint").
+
+Run: python benchmarks/bench_calibrate.py [--out DIR] [--workers 2 | --scaling] [--n1 500] [--n2 500]
 """
 from __future__ import annotations
 
@@ -47,24 +51,51 @@ def make_measurement(path: Path) -> dict:
     return truth
 
 
+def calibrate_once(measured: Path, out: Path, workers: int, n1: int, n2: int):
+    """One calibration of ``measured`` with ``workers`` local workers: (result, wall [s], load averages)."""
+    load0 = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    res = cal.calibrate(bundled_scenario(SCENARIO), measured, out, n1=n1, n2=n2, workers=workers, progress=False)
+    return res, time.perf_counter() - t0, (load0, os.getloadavg()[0])
+
+
+def scaling(measured: Path, out: Path, n1: int, n2: int, max_workers: int) -> str:
+    """The same calibration with 1 .. ``max_workers`` workers: wall, speed-up, parallel efficiency
+    T_1 / (N T_N) (issue "Speed and footprint": printed at every count, so a bigger machine shows it)."""
+    lines = ["| workers | wall [s] | speed-up | parallel efficiency | load average start / end |", "|---|---|---|---|---|"]
+    t1 = None
+    for n in range(1, max_workers + 1):
+        _, wall, (l0, l1) = calibrate_once(measured, out / f"workers_{n}", n, n1, n2)
+        t1 = t1 or wall
+        lines.append(f"| {n} | {wall:.0f} | {t1 / wall:.2f} | {100 * t1 / (n * wall):.0f} % | {l0:.1f} / {l1:.1f} |")
+        print(lines[-1], flush=True)
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", type=Path, default=None, help="output folder (default: a temporary one)")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--scaling", action="store_true",
+                    help="run the calibration with 1, 2, ... up to the machine's cores workers and record the "
+                         "parallel efficiency at each count (instead of one calibration with --workers)")
     ap.add_argument("--n1", type=int, default=500)
     ap.add_argument("--n2", type=int, default=500)
     args = ap.parse_args()
+    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp) / "calibration"
         out.mkdir(parents=True, exist_ok=True)
         measured = out / "measured.csv"
         truth = make_measurement(measured)
-        load0 = os.getloadavg()[0]
-        t0 = time.perf_counter()
-        res = cal.calibrate(bundled_scenario(SCENARIO), measured, out / "result", n1=args.n1, n2=args.n2,
-                            workers=args.workers, progress=False)
-        wall = time.perf_counter() - t0
-        load1 = os.getloadavg()[0]
+        if args.scaling:
+            table = scaling(measured, out, args.n1, args.n2, os.cpu_count() or 1)
+            with Path(__file__).with_name("RESULTS.md").open("a") as f:
+                f.write(f"\n## Calibration, parallel efficiency per worker count — {stamp}, {machine}\n\n"
+                        f"`python benchmarks/bench_calibrate.py --scaling --n1 {args.n1} --n2 {args.n2}`\n\n{table}\n")
+            return
+        res, wall, (load0, load1) = calibrate_once(measured, out / "result", args.workers, args.n1, args.n2)
         s = res.summary
     pol = s["polish"]
     extra = pol.get("runs", 0) + (s["calibrated"]["source"] == "polish")  # polish runs + the final re-run
@@ -106,8 +137,6 @@ def main() -> None:
     ])
     print(text)
     print(json.dumps({k: s[k] for k in ("optimum", "best_run", "polish", "calibrated")}, indent=1))
-    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
-    machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     with Path(__file__).with_name("RESULTS.md").open("a") as f:
         f.write(f"\n## Calibration, 8 parameters (6 gaps + h1 + h2) — {stamp}, {machine}\n\n"
                 f"`python benchmarks/bench_calibrate.py`\n\n{text}\n")

@@ -276,7 +276,9 @@ def test_record_columns_cover_what_the_post_processing_reads():
     a = read_sensors(model, compiled, part, 1e-4, 5.0, reconstruct=False)
     b = read_sensors(model, compiled, full, 1e-4, 5.0, reconstruct=False)
     for sid in b:
-        assert np.array_equal(a[sid], b[sid]), sid
+        # the record of some columns is read as it is (no full-width rows): the same products over
+        # fewer terms, summed in another order by BLAS: round-off of the largest term (1e-12 of it)
+        assert np.allclose(a[sid], b[sid], rtol=0, atol=1e-12 * np.abs(b[sid]).max()), sid
 
 
 def test_fmus_are_built_once_per_build_inputs_and_copied_from_the_cache(tmp_path, monkeypatch):

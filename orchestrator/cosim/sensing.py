@@ -63,9 +63,9 @@ def read_sensors(model, compiled: CompiledSensors, record: dict, dt: float, high
                  reconstruct: bool = True) -> dict:
     """The sensors' signals from a track record (all columns, or those of :func:`sensor_columns`).
 
-    Read in blocks of :data:`SENSOR_BLOCK` output steps (full-width rows of a block at a
-    time: ``track.cosim.state_rows``); displacement sensors are then reconstructed from
-    their accelerometer's whole signal (:func:`track.sensors.displacement_from_acceleration`),
+    Read in blocks of :data:`SENSOR_BLOCK` output steps (a record of some columns as it is:
+    ``sensor_signals(columns=...)``; one of all columns as full-width rows); displacement
+    sensors are then reconstructed from their accelerometer's whole signal (:func:`track.sensors.displacement_from_acceleration`),
     as :func:`track.sensors.sensor_signals` does in one go.
 
     Parameters
@@ -87,11 +87,14 @@ def read_sensors(model, compiled: CompiledSensors, record: dict, dt: float, high
         Sensor id -> signal (nt,), SI units.
     """
     n, nt = model.n, len(record["t"])
+    columns = {k: record.get(f"{k}_columns") for k in ("q", "v", "a")}
+    some = all(c is not None for c in columns.values())   # a record of some columns: read as they are
     blocks = []
     for b in range(0, nt, SENSOR_BLOCK):
         rows = slice(b, b + SENSOR_BLOCK)
-        q, v, a = (state_rows(record, k, n, rows) for k in ("q", "v", "a"))
-        blocks.append(sensor_signals(model, compiled, q, v, a, dt, highpass, reconstruct=False))
+        q, v, a = (record[k][rows] if some else state_rows(record, k, n, rows) for k in ("q", "v", "a"))
+        blocks.append(sensor_signals(model, compiled, q, v, a, dt, highpass, reconstruct=False,
+                                     columns=columns if some else None))
     out = {}
     for s in compiled.sensors:
         sig = np.concatenate([blk[s.id] for blk in blocks]) if blocks else np.empty(0)

@@ -67,6 +67,10 @@ class Ballast:
             f = f - self.c * v * np.clip(delta / DAMPING_ONSET, 0.0, 1.0)
         return np.where(delta > 0.0, np.maximum(f, 0.0), 0.0)
 
+    def subset(self, idx: np.ndarray) -> "Ballast":
+        """The bushings ``idx`` alone (index array into the nb bushings)."""
+        return Ballast(*(getattr(self, f)[idx] for f in ("dof", "k", "c", "gap", "sleeper", "y", "area")))
+
     def active(self, u: np.ndarray) -> np.ndarray:
         """Bushings in contact (compression > 0)."""
         return (-u - self.gap) > 0.0

@@ -224,7 +224,7 @@ def compile_sensors(model: TrackModel, sensors) -> CompiledSensors:
 
 def sensor_signals(model: TrackModel, compiled: CompiledSensors, q: np.ndarray, v: np.ndarray,
                    a: np.ndarray, dt: float, highpass: float = RECONSTRUCTION_HIGHPASS,
-                   reconstruct: bool = True) -> dict[str, np.ndarray]:
+                   reconstruct: bool = True, columns: dict | None = None) -> dict[str, np.ndarray]:
     """Simulated sensor signals from state histories.
 
     Parameters
@@ -241,6 +241,11 @@ def sensor_signals(model: TrackModel, compiled: CompiledSensors, q: np.ndarray, 
         ``False``: displacement sensors give their accelerometer's signal [m/s^2], to be
         reconstructed later on another time base (as the comparison with a measurement
         does, on the measured window).
+    columns : dict, optional
+        ``{"q": cols, "v": cols, "a": cols}``: ``q``, ``v``, ``a`` hold only these sorted
+        columns of the states (a record of some columns, ``track.cosim.Record``), shape
+        (nt, len(cols)); the states outside them count as zero, as in the full-width rows
+        of ``track.cosim.state_rows``, without building those rows.
 
     Returns
     -------
@@ -248,10 +253,15 @@ def sensor_signals(model: TrackModel, compiled: CompiledSensors, q: np.ndarray, 
         Sensor id -> signal, shape (nt,), SI units.
     """
     q, v, a = (np.atleast_2d(np.asarray(x, float)) for x in (q, v, a))
-    out_q = q @ compiled.Cq.T
-    out_a = a @ compiled.Ca.T
     D = model.ballast.dof
-    p = model.ballast.pressure(q[:, D], v[:, D]) @ compiled.Pb.T
+    if columns is None:
+        out_q, out_a = q @ compiled.Cq.T, a @ compiled.Ca.T
+        p = model.ballast.pressure(q[:, D], v[:, D]) @ compiled.Pb.T
+    else:   # and only the bushings under pressure cells (the others' weights are 0)
+        out_q, out_a = q @ compiled.Cq[:, columns["q"]].T, a @ compiled.Ca[:, columns["a"]].T
+        cells = np.flatnonzero(np.any(compiled.Pb != 0.0, axis=0))
+        p = model.ballast.subset(cells).pressure(_columns_of(q, columns["q"], D[cells]),
+                                                 _columns_of(v, columns["v"], D[cells])) @ compiled.Pb[:, cells].T
     signals = {}
     for i, s in enumerate(compiled.sensors):
         if s.type == "pressure":
@@ -263,6 +273,17 @@ def sensor_signals(model: TrackModel, compiled: CompiledSensors, q: np.ndarray, 
         else:
             signals[s.id] = out_q[:, i]
     return signals
+
+
+def _columns_of(x: np.ndarray, cols: np.ndarray, dofs: np.ndarray) -> np.ndarray:
+    """Columns ``dofs`` of states ``x`` that hold the sorted columns ``cols`` only: (nt, len(dofs)),
+    zero for a dof that is not among them."""
+    cols = np.asarray(cols)
+    pos = np.minimum(np.searchsorted(cols, dofs), max(cols.size - 1, 0))
+    have = cols[pos] == dofs if cols.size else np.zeros(dofs.size, bool)
+    out = np.zeros((x.shape[0], dofs.size))
+    out[:, have] = x[:, pos[have]]
+    return out
 
 
 # ----------------------------------------------------------------------------------------
