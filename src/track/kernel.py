@@ -1057,8 +1057,6 @@ class CompiledContacts:
     def step(self, x: np.ndarray, z_wheel: np.ndarray, c_h: float, y: np.ndarray | None = None) -> np.ndarray:
         """One step; same contract as :meth:`TrackIntegrator.step_contacts` with the wheels at x [m]
         (``y``: each wheel's lateral offset towards its field side [m], for contact tables)."""
-        from .dynamics import ConvergenceError
-
         it = self.integ
         m, n = len(self.sides), self.model.n
         x = np.ascontiguousarray(x, dtype=float)
@@ -1092,6 +1090,7 @@ class CompiledContacts:
         c.solves += int(cnt[C_SOLVES])
         c.contact_newton += int(cnt[C_NEWTON])
         if status != OK:
+            from .dynamics import ConvergenceError
             t1 = it.t + it.h
             if status == NEWTON_FAILED:
                 raise ConvergenceError(f"contact forces at t = {t1:.6g} s did not converge; "
