@@ -1,6 +1,8 @@
 """Plan-view plot of a generated track layout (:func:`track.layout.build_layout`)."""
 from __future__ import annotations
 
+from orchestrator.results.plots import set_margins, set_title
+
 # Colour per plan-line kind (PlanLine.kind).
 KIND_COLOURS = {"stock": "black", "closure": "tab:blue", "rail": "dimgray", "wing": "tab:orange",
                 "nose": "tab:red", "check": "tab:green"}
@@ -27,13 +29,14 @@ def plot_layout(layout, ax=None):
 
     if ax is None:
         fig, ax = plt.subplots(figsize=(14, 4.5))
+        set_margins(fig)   # fixed margins (plots.LEFT ...) rather than matplotlib's default ones
     else:
         fig = ax.figure
     _draw_sleepers(ax, layout)
     _draw_rails(ax, layout)
     ax.set_xlabel("x along the through route [m]")
     ax.set_ylabel("y lateral [m] (+ left)")
-    ax.set_title(_title(layout))
+    set_title(ax, _title(layout))
     ax.autoscale_view()
     ax.legend(loc="upper left", fontsize=7, ncol=4)
     return fig

@@ -40,21 +40,26 @@ def plotted_analysis(an) -> tuple[dict, dict, dict]:
 def track_results(out_dir: Path, name: str, a: dict, meta: dict, t: dict) -> None:
     """envelopes.png and moments.png from the analysis (``a``, ``meta``, ``t``: an
     :class:`orchestrator.results.analysis.Analysis`'s ``arrays``, ``meta`` and ``scalars``)."""
-    from track.post import BodyResponse
-
     rail_name, sl_name = meta["crossing_rail"], f"sleeper_{meta['transition_sleeper']}"
     plots.save(plots.plot_envelopes(a["rail_x"], np.stack([a["rail_M_min"], a["rail_M_max"]]),
                                     a["sleeper_y"], np.stack([a["sleeper_M_min"], a["sleeper_M_max"]]),
                                     a["ballast_y"], a["ballast_p_max"], rail_name, sl_name),
                out_dir / "envelopes.png")
     inst_r = {f"t = {t['time_max_rail_moment']:.4f} s (max rail moment)":
-              BodyResponse(coord=a["rail_x"], w=a["rail_w_at_max"], moment=a["rail_M_at_max"])}
+              _body_line(a["rail_x"], a["rail_w_at_max"], a["rail_M_at_max"])}
     inst_s = {f"t = {t['time_max_sleeper_moment']:.4f} s (max sleeper moment)":
-              BodyResponse(coord=a["sleeper_y"], w=a["sleeper_w_at_max"], moment=a["sleeper_M_at_max"])}
+              _body_line(a["sleeper_y"], a["sleeper_w_at_max"], a["sleeper_M_at_max"])}
     plots.save(plots.plot_body_lines(inst_r, inst_s, f"{name}: instants of maximum moment",
                                      rail_name, f"{sl_name} (crossing transition)",
                                      marks_rail=[a["x_transition"][0]],
                                      marks_sleeper=list(a["wheel_y"])), out_dir / "moments.png")
+
+
+def _body_line(coord, w, moment) -> SimpleNamespace:
+    """A body's deflection and moment along it as :func:`plots.plot_body_lines` reads them (the
+    fields of a ``track.post.BodyResponse``: importing :mod:`track.post` loads scipy.sparse, 0.13 s
+    of the figure process's last job, which the run waits for)."""
+    return SimpleNamespace(coord=coord, w=w, moment=moment)
 
 
 def contact_path(out_dir: Path, lay, res, geometry: dict) -> None:
