@@ -36,14 +36,34 @@ works in (:class:`orchestrator.inverse.selection.CauseFitter`):
    group share their position and model-form error), so G is small (six): the half-width
    is the Student quantile ``t_{0.95, G-1} sd`` (Cameron & Miller's few-cluster advice).
 
-Each entry's 90 % interval is ``u +- max(Z90 sd_noise, t sd_groups)``: each spread is an
-estimate of the same sampling spread under a different assumption (the model is right /
-the groups are exchangeable), and the interval must hold under either. Clipped to the
-bounds and mapped to the parameter's units (log axis for stiffness factors: the interval
-is then asymmetric in the factor). Directions the data do not see (eigenvalues of
-``J^T J`` below :data:`RCOND` x the largest) get an infinite variance. Not included: the
-uncertainty of the nuisance estimates (speed, vehicle, damping, channel gains) the cause
-is fitted on top of — a model-form error all groups share is invisible to both terms.
+3. **Nuisance parameters** (a model-form error all groups share, invisible to 2.: the
+   cause is fitted with the vehicle and the track damping held at the nuisance stage's
+   values, :mod:`orchestrator.inverse.nuisance`, mostly their nominal ones since the data
+   rarely identify them; a heavier wheelset or a faster passage raises the impact load
+   as a steeper nose does, so a held nuisance error moves the cause's best fit). The
+   fit's error from a held nuisance error ``d_theta`` is, linearised,
+   ``S d_theta``, ``S = -(J^T J)^+ J^T J_n``, so term 1 becomes::
+
+       Cov(u) = tau s^2 (J^T J)^+ + S Sigma_n S^T
+
+   with ``J_n`` the secant of the residuals over one prior standard deviation of each
+   nuisance parameter at the fitted cause (:data:`NUISANCE_SD`: the
+   :data:`orchestrator.inverse.nuisance.PRIORS` ranges read as uniform priors, sd = range
+   / sqrt(12); one run each, :func:`nuisance_jacobian`). The prior, not the nuisance
+   stage's own interval, is used: that interval was estimated without the cause and
+   with the same single-model assumption this term is there to relax. The speed is left
+   out: the data fix it to +-0.25 % (its prior), an sd of 0.3 % of the impact load
+   against the vehicle's 6 %.
+
+Each entry's 90 % interval is ``u +- max(Z90 sd_1+3, t sd_2)``: each spread is an
+estimate of the same sampling spread under a different assumption (the model is right up
+to the nuisance parameters / the groups are exchangeable), and the interval must hold
+under either. Clipped to the bounds and mapped to the parameter's units (log axis for
+stiffness factors: the interval is then asymmetric in the factor). Directions the data
+do not see (eigenvalues of ``J^T J`` below :data:`RCOND` x the largest) get an infinite
+variance. Cost: the Jacobian at the fit (up to k runs, mostly cached from the fit) and
+one run per nuisance parameter (five with the default vehicle) per named cause; the
+groups' term needs none.
 
 A parameter is **not identifiable** when its interval covers at least :data:`IDENT_SHARE`
 of its bounds (in the unit cube, i.e. on the log axis for stiffness factors): the data
@@ -62,6 +82,15 @@ from orchestrator.inputs.causes import kind_of
 Z90 = 1.6449         # two-sided 90 % quantile of the standard normal
 IDENT_SHARE = 0.5    # an interval covering this share of the bounds (unit cube) or more: not identifiable
 RCOND = 1e-10        # eigenvalues of J^T J below this x the largest: a direction the data do not see
+UNIFORM_SD = 1.0 / np.sqrt(12.0)   # sd of a uniform prior over a range of width 1
+
+
+def _prior_sd() -> dict:
+    """Nuisance parameter -> (catalogue cause, prior sd of its relative change; log axis or linear)."""
+    from orchestrator.inverse.nuisance import PRIORS
+
+    return {name: (cause, (np.log(b / a) if log else b - a) * UNIFORM_SD, bool(log))
+            for name, (cause, (a, b), log) in PRIORS.items() if name != "speed"}
 
 
 def unit_covariance(jac: np.ndarray, r: np.ndarray, n_eff: float) -> np.ndarray:
@@ -115,6 +144,59 @@ def group_jackknife(jac: np.ndarray, r: np.ndarray, groups: np.ndarray, u: np.nd
         shifts.append(np.clip(u + step, 0.0, 1.0) - u)
     n_g = len(labels)
     return (n_g - 1) / n_g * np.sum(np.square(shifts), axis=0), n_g
+
+
+def nuisance_jacobian(fitter, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Secants of the weighted residuals over one prior sd of each nuisance parameter at the fitted cause.
+
+    One run per nuisance parameter the scenario has (module doc, 3.); a parameter whose
+    run fails or that the vehicle does not have is left out.
+
+    Returns
+    -------
+    (ndarray, ndarray)
+        ``J_n`` (n, m) per unit of the parameters' prior sd, and those sds (all ones: the
+        columns are already scaled).
+    """
+    from orchestrator.inputs.causes import CATALOGUE
+    from orchestrator.inverse.screening import checked_comparison
+
+    c = fitter.start.candidate
+    kind = kind_of(c)
+    u = np.clip(kind.to_unit(values), 0.0, 1.0)
+    r0 = fitter.residuals([u])[0]
+    at_fit = kind.apply(fitter.raw, c.sleeper, kind.from_unit(u))
+    raws, names = [], []
+    for name, (cause, sd, log) in _prior_sd().items():
+        try:
+            x = float(CATALOGUE[cause].nominal(at_fit, None)[0])
+        except ValueError:
+            continue
+        raws.append(CATALOGUE[cause].apply(at_fit, None, [x * (np.exp(sd) if log else 1.0 + sd)]))
+        names.append(name)
+    fitter.pool.expect(len(raws))
+    cols = []
+    for run in fitter.pool.map(raws) if raws else []:
+        cmp, _ = checked_comparison(fitter.target, run, fitter.reference)
+        if cmp is not None:
+            cols.append(fitter.target.weighted_residuals(cmp) - r0)
+    jn = np.column_stack(cols) if cols else np.zeros((r0.size, 0))
+    return jn, np.ones(jn.shape[1])
+
+
+def nuisance_covariance(jac: np.ndarray, jac_nuis: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """``S Sigma_n S^T``, ``S = -(J^T J)^+ J^T J_n``: the fit's spread from held nuisance errors (module doc, 3.).
+
+    ``jac_nuis`` per unit of the nuisance parameters (``sd`` their prior sds in those units).
+    Unseen directions of ``J^T J`` are left to :func:`unit_covariance` (infinite there).
+    """
+    if jac_nuis.shape[1] == 0:
+        return np.zeros((jac.shape[1],) * 2)
+    lam, vec = np.linalg.eigh(jac.T @ jac)
+    top = max(float(lam.max()), 1e-300)
+    inv = np.where(lam > RCOND * top, 1.0 / np.maximum(lam, 1e-300), 0.0)
+    sens = -((vec * inv) @ vec.T) @ (jac.T @ jac_nuis)
+    return (sens * np.square(sd)) @ sens.T
 
 
 def residual_groups(target, cmp) -> np.ndarray:
@@ -181,29 +263,33 @@ def pinning_sensor(candidate, index: int, n_points: int | None = None) -> str:
 
 
 def cause_uncertainty(fitter, values: np.ndarray, n_eff: float) -> dict:
-    """Intervals of a fitted cause from its fitter's runs (a Jacobian at ``values``: up to n more runs).
+    """Intervals of a fitted cause from its fitter's runs (module doc; runs: the Jacobian at ``values``, up
+    to k, and one per nuisance parameter).
 
-    Both spreads of the module doc come from the same Jacobian and residual (the sensor
-    groups' one is linearised: no further runs). ``unit_half_width`` reports each
-    (unit cube; ``None`` for an unseen direction, or for the groups' when fewer than two
-    groups hold residual).
+    ``unit_half_width`` reports each spread (unit cube; ``None`` for an unseen direction,
+    or for the groups' when fewer than two groups hold residual): ``noise`` (term 1 alone,
+    the earlier interval), ``noise_and_nuisance`` (1 + 3) and ``sensor_groups`` (2).
     """
     jac, r = fitter.jacobian(values)
     cov = unit_covariance(jac, r, n_eff * r.size / max(fitter.start.cmp.n, 1))
     u = np.clip(kind_of(fitter.start.candidate).to_unit(values), 0.0, 1.0)
+    jn, sd = nuisance_jacobian(fitter, values)
+    cov_n = cov + nuisance_covariance(jac, jn, sd)
     cmp = fitter.runs([u])[0]
     groups = residual_groups(fitter.target, cmp) if cmp is not None else None
     if groups is not None and groups.size == r.size:
         var_g, n_g = group_jackknife(jac, r, groups, u)
     else:   # a failed run at the fit (a penalty residual): no group structure to use
         var_g, n_g = None, 0
-    hw = half_widths(cov, var_g, n_g)
-    out = intervals(fitter.start.candidate, values, cov, hw["half"])
+    hw = half_widths(cov_n, var_g, n_g)
+    out = intervals(fitter.start.candidate, values, cov_n, hw["half"])
+    hw["noise_and_nuisance"], hw["noise"] = hw["noise"], (Z90 * np.sqrt(np.maximum(np.diag(cov), 0.0))).tolist()
     out["unit_half_width"] = {k: None if hw[k] is None else [x if np.isfinite(x) else None for x in hw[k]]
-                              for k in ("noise", "sensor_groups")}
-    out["sensor_groups"] = n_g
+                              for k in ("noise", "noise_and_nuisance", "sensor_groups")}
+    out["sensor_groups"], out["nuisance_runs"] = n_g, int(jn.shape[1])
     return out
 
 
-__all__ = ["unit_covariance", "group_jackknife", "residual_groups", "half_widths", "intervals", "pinning_sensor",
-           "cause_uncertainty", "Z90", "IDENT_SHARE", "RCOND"]
+__all__ = ["unit_covariance", "nuisance_jacobian", "nuisance_covariance", "group_jackknife", "residual_groups", "half_widths", "intervals", "pinning_sensor",
+           "cause_uncertainty", "Z90", "IDENT_SHARE", "RCOND",
+           "UNIFORM_SD"]
