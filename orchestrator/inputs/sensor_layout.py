@@ -22,6 +22,7 @@ objects for a given track model. The default layout is
 """
 from __future__ import annotations
 
+import copy
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -145,14 +146,31 @@ def layout_from_dict(data, source: str = "<dict>") -> SensorLayout:
     return SensorLayout(str(data.get("name", Path(source).stem)), rate, hp, full, out, source)
 
 
+_LOADED: dict = {}   # (path, mtime, size) -> SensorLayout: every run of a diagnosis reads the same file
+_LOADED_MAX = 16     # (pyyaml parses the default layout in ~30 ms, a tenth of a short run's overhead)
+
+
 def load_layout(path=None) -> SensorLayout:
-    """Read and validate a layout file; ``None`` -> the default layout."""
+    """Read and validate a layout file; ``None`` -> the default layout. A file read before and
+    unchanged since (same modification time and size) is not parsed again (a copy is returned)."""
     path = default_layout_path() if path is None else Path(path)
+    try:
+        st = path.stat()
+        key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:
+        key = None   # read_yaml says what is wrong with it
+    if key in _LOADED:
+        return copy.deepcopy(_LOADED[key])
     try:
         data = read_yaml(path)
     except UserInputError as exc:
         raise UserInputError(f"sensor layout: {exc}") from None
-    return layout_from_dict(data, str(path))
+    layout = layout_from_dict(data, str(path))
+    if key is not None:
+        if len(_LOADED) >= _LOADED_MAX:
+            _LOADED.pop(next(iter(_LOADED)))
+        _LOADED[key] = copy.deepcopy(layout)
+    return layout
 
 
 def _transition(model: TrackModel) -> tuple[int, float]:
