@@ -144,6 +144,8 @@ def test_direction_only_one_group_sees_keeps_the_noise_term():
     r0 = X @ u - (X @ [-0.2, 0.3])
     var0, _ = group_jackknife(X, r0, grp, u)
     assert var0[0] == 0.0
+    # ... and the free one is refitted as without it (consistency check of the active set)
+    assert var0[1] == pytest.approx(group_jackknife(X[:, 1:], r0, grp, u[1:])[0][0], rel=1e-9)
 
 
 def test_residual_groups_follow_the_weighted_residuals_order():

@@ -29,7 +29,9 @@ works in (:class:`orchestrator.inverse.selection.CauseFitter`):
    (one Gauss-Newton step of the bounded refit without group g from the fit; exact for a
    linear model; ``^+`` the inverse on the directions the remaining groups see: a
    direction only group g sees has no refit without it and adds nothing, the noise term
-   then stands). The spread is taken about the fit, not about the jackknife mean: the
+   then stands; a parameter the fit holds on a bound with the gradient pushing out —
+   a void point resting on the bed — stays there, :func:`held_at_bound`, and so it does
+   in term 3). The spread is taken about the fit, not about the jackknife mean: the
    interval is centred on the fit, and a fit the trust region left short of its optimum
    (``J^T r != 0``) widens it by the step it did not take. Groups' residuals are
    independent given the model only if whole groups are the clusters (the channels of a
@@ -83,6 +85,8 @@ Z90 = 1.6449         # two-sided 90 % quantile of the standard normal
 IDENT_SHARE = 0.5    # an interval covering this share of the bounds (unit cube) or more: not identifiable
 RCOND = 1e-10        # eigenvalues of J^T J below this x the largest: a direction the data do not see
 UNIFORM_SD = 1.0 / np.sqrt(12.0)   # sd of a uniform prior over a range of width 1
+BOUND_TOL = 0.01     # a parameter this close to a face of the unit cube is on it: half the Jacobian's step
+#                      (fitting.STEP), closer than the forward difference resolves
 
 
 def _prior_sd() -> dict:
@@ -133,17 +137,31 @@ def group_jackknife(jac: np.ndarray, r: np.ndarray, groups: np.ndarray, u: np.nd
     labels = [g for g in dict.fromkeys(groups.tolist()) if np.any(r[groups == g] != 0.0)]
     if len(labels) < 2:
         return np.zeros(jac.shape[1]), len(labels)
-    a_all, grad_all = jac.T @ jac, jac.T @ r
-    top = max(float(np.linalg.eigvalsh(a_all).max()), 1e-300)
+    free = ~held_at_bound(jac, r, u)
+    jf = jac[:, free]
+    a_all, grad_all = jf.T @ jf, jf.T @ r
+    top = max(float(np.linalg.eigvalsh(a_all).max()), 1e-300) if free.any() else 1.0
     shifts = []
     for g in labels:
         m = groups == g
-        lam, vec = np.linalg.eigh(a_all - jac[m].T @ jac[m])
+        lam, vec = np.linalg.eigh(a_all - jf[m].T @ jf[m])
         inv = np.where(lam > RCOND * top, 1.0 / np.maximum(lam, 1e-300), 0.0)   # unseen without g: no refit
-        step = -((vec * inv) @ vec.T) @ (grad_all - jac[m].T @ r[m])
+        step = np.zeros_like(u)
+        step[free] = -((vec * inv) @ vec.T) @ (grad_all - jf[m].T @ r[m])
         shifts.append(np.clip(u + step, 0.0, 1.0) - u)
     n_g = len(labels)
     return (n_g - 1) / n_g * np.sum(np.square(shifts), axis=0), n_g
+
+
+def held_at_bound(jac: np.ndarray, r: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Parameters the bounded fit holds on a face of the cube: within :data:`BOUND_TOL` of it, the gradient pushing out.
+
+    A bounded refit keeps them there (a void point resting on the bed stays at gap 0),
+    so the linearised refits and the held-nuisance shifts move only the others; letting
+    them cross the face would let the free ones compensate a move the fit cannot make.
+    """
+    grad = jac.T @ r      # d(|r|^2 / 2) / du: descent is -grad
+    return ((u <= BOUND_TOL) & (grad > 0)) | ((u >= 1.0 - BOUND_TOL) & (grad < 0))
 
 
 def nuisance_jacobian(fitter, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,18 +202,25 @@ def nuisance_jacobian(fitter, values: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return jn, np.ones(jn.shape[1])
 
 
-def nuisance_covariance(jac: np.ndarray, jac_nuis: np.ndarray, sd: np.ndarray) -> np.ndarray:
+def nuisance_covariance(jac: np.ndarray, jac_nuis: np.ndarray, sd: np.ndarray,
+                        free: np.ndarray | None = None) -> np.ndarray:
     """``S Sigma_n S^T``, ``S = -(J^T J)^+ J^T J_n``: the fit's spread from held nuisance errors (module doc, 3.).
 
     ``jac_nuis`` per unit of the nuisance parameters (``sd`` their prior sds in those units).
-    Unseen directions of ``J^T J`` are left to :func:`unit_covariance` (infinite there).
+    ``free``: the parameters the fit moves (default all; :func:`held_at_bound` gives the
+    others, whose rows of S are 0). Unseen directions of ``J^T J`` are left to
+    :func:`unit_covariance` (infinite there).
     """
-    if jac_nuis.shape[1] == 0:
-        return np.zeros((jac.shape[1],) * 2)
-    lam, vec = np.linalg.eigh(jac.T @ jac)
+    k = jac.shape[1]
+    free = np.ones(k, bool) if free is None else np.asarray(free, bool)
+    if jac_nuis.shape[1] == 0 or not free.any():
+        return np.zeros((k, k))
+    jf = jac[:, free]
+    lam, vec = np.linalg.eigh(jf.T @ jf)
     top = max(float(lam.max()), 1e-300)
     inv = np.where(lam > RCOND * top, 1.0 / np.maximum(lam, 1e-300), 0.0)
-    sens = -((vec * inv) @ vec.T) @ (jac.T @ jac_nuis)
+    sens = np.zeros((k, jac_nuis.shape[1]))
+    sens[free] = -((vec * inv) @ vec.T) @ (jf.T @ jac_nuis)
     return (sens * np.square(sd)) @ sens.T
 
 
@@ -274,7 +299,7 @@ def cause_uncertainty(fitter, values: np.ndarray, n_eff: float) -> dict:
     cov = unit_covariance(jac, r, n_eff * r.size / max(fitter.start.cmp.n, 1))
     u = np.clip(kind_of(fitter.start.candidate).to_unit(values), 0.0, 1.0)
     jn, sd = nuisance_jacobian(fitter, values)
-    cov_n = cov + nuisance_covariance(jac, jn, sd)
+    cov_n = cov + nuisance_covariance(jac, jn, sd, ~held_at_bound(jac, r, u))
     cmp = fitter.runs([u])[0]
     groups = residual_groups(fitter.target, cmp) if cmp is not None else None
     if groups is not None and groups.size == r.size:
@@ -290,6 +315,6 @@ def cause_uncertainty(fitter, values: np.ndarray, n_eff: float) -> dict:
     return out
 
 
-__all__ = ["unit_covariance", "nuisance_jacobian", "nuisance_covariance", "group_jackknife", "residual_groups", "half_widths", "intervals", "pinning_sensor",
-           "cause_uncertainty", "Z90", "IDENT_SHARE", "RCOND",
-           "UNIFORM_SD"]
+__all__ = ["unit_covariance", "nuisance_jacobian", "nuisance_covariance", "group_jackknife", "held_at_bound",
+           "residual_groups", "half_widths", "intervals", "pinning_sensor", "cause_uncertainty", "Z90",
+           "IDENT_SHARE", "RCOND", "UNIFORM_SD", "BOUND_TOL"]
