@@ -53,9 +53,8 @@ works in (:class:`orchestrator.inverse.selection.CauseFitter`):
    :data:`orchestrator.inverse.nuisance.PRIORS` ranges read as uniform priors, sd = range
    / sqrt(12); one run each, :func:`nuisance_jacobian`). The prior, not the nuisance
    stage's own interval, is used: that interval was estimated without the cause and
-   with the same single-model assumption this term is there to relax. The speed is left
-   out: the data fix it to +-0.25 % (its prior), an sd of 0.3 % of the impact load
-   against the vehicle's 6 %.
+   with the same single-model assumption this term is there to relax. The speed's prior
+   is the nuisance stage's +-0.5 % about its estimate from the data (sd 0.3 %).
 
 Each entry's 90 % interval is ``u +- max(Z90 sd_1+3, t sd_2)``: each spread is an
 estimate of the same sampling spread under a different assumption (the model is right up
@@ -64,7 +63,7 @@ under either. Clipped to the bounds and mapped to the parameter's units (log axi
 stiffness factors: the interval is then asymmetric in the factor). Directions the data
 do not see (eigenvalues of ``J^T J`` below :data:`RCOND` x the largest) get an infinite
 variance. Cost: the Jacobian at the fit (up to k runs, mostly cached from the fit) and
-one run per nuisance parameter (five with the default vehicle) per named cause; the
+one run per nuisance parameter (six with the default vehicle) per named cause; the
 groups' term needs none.
 
 A parameter is **not identifiable** when its interval covers at least :data:`IDENT_SHARE`
@@ -94,7 +93,7 @@ def _prior_sd() -> dict:
     from orchestrator.inverse.nuisance import PRIORS
 
     return {name: (cause, (np.log(b / a) if log else b - a) * UNIFORM_SD, bool(log))
-            for name, (cause, (a, b), log) in PRIORS.items() if name != "speed"}
+            for name, (cause, (a, b), log) in PRIORS.items()}
 
 
 def unit_covariance(jac: np.ndarray, r: np.ndarray, n_eff: float) -> np.ndarray:
@@ -190,6 +189,7 @@ def nuisance_jacobian(fitter, values: np.ndarray) -> tuple[np.ndarray, np.ndarra
             x = float(CATALOGUE[cause].nominal(at_fit, None)[0])
         except ValueError:
             continue
+        sd = -sd if name == "speed" else sd   # slower: the run is longer (the same stretch), the record stays covered
         raws.append(CATALOGUE[cause].apply(at_fit, None, [x * (np.exp(sd) if log else 1.0 + sd)]))
         names.append(name)
     fitter.pool.expect(len(raws))
