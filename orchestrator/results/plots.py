@@ -5,8 +5,9 @@ import numpy as np
 
 # A time series longer than this many points is drawn through the minimum and maximum of each of
 # MAX_POINTS / 2 equal slices: with 5001 points at the 110 dpi of :func:`save` a 10-inch axes gives
-# each pixel column 5-6 samples, whose vertical extent the slice's min and max already draw; the
-# legend's "best" placement, which scans every point, costs 40 % less (measured 0.19 s -> 0.12 s).
+# each pixel column 5-6 samples, whose vertical extent the slice's min and max already draw. It paid
+# while the legend searched the "best" place, scanning every point (0.19 s -> 0.12 s); with the
+# legend outside the axes (:func:`legend_outside`) both take 0.12 s (displacements.png, measured).
 MAX_POINTS = 2000
 
 
