@@ -61,6 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .params import CHECK_RAIL_33C1, CONCRETE_BEARER, RAIL_SECTIONS, BeamProfile, LayoutParams
+from .roots import bracketed_root
 
 # --- rail and flangeway dimensions -------------------------------------------------
 # Rail head widths [m]: 60E1 = 72 mm (EN 13674-1). The seat (centreline) of a rail is
@@ -106,7 +107,7 @@ BEARER_LENGTH_STEP = 0.1  # m, bearer lengths are manufactured in 0.1 m steps
 MIN_SEATS_PER_BODY = 2  # a beam body needs two supports to be a statically stable body
 PLAN_STEP = 0.1  # m, sampling step of the plan-view polylines (chord sag < 3e-6 m at R 500)
 MIN_SLEEPERS = 4
-_ROOT_XTOL = 1e-12  # m, brentq tolerance: far below any geometric tolerance that matters
+_ROOT_XTOL = 1e-12  # m, root tolerance (track.roots): far below any geometric tolerance that matters
 
 _CROSSING_RE = re.compile(r"^\s*1\s*:\s*([0-9]+(?:\.[0-9]*)?)\s*$")
 
@@ -368,8 +369,7 @@ class TurnoutGeometry:
         return r * math.sin(self.alpha) + (self.gauge + CROSSING_REAR_SEPARATION + 1.0) / math.tan(self.alpha)
 
     def _x_at_separation(self, target: float, lo: float, hi: float) -> float:
-        from scipy.optimize import brentq   # here: importing scipy.optimize costs ~0.15 s of every start
-        return brentq(lambda x: self.separation(x) - target, lo, hi, xtol=_ROOT_XTOL)
+        return bracketed_root(lambda x: self.separation(x) - target, lo, hi, _ROOT_XTOL)
 
     @property
     def x_tcp(self) -> float:

@@ -58,6 +58,8 @@ from functools import cached_property
 
 import numpy as np
 
+from .roots import bracketed_root
+
 # ----------------------------------------------------------------------------- S1002
 # Sections of S1002 in mm (s_mm from the taping line, field side +; F_mm = radius increment).
 # (from, to, kind, coefficients): "poly": F = sum c_k s^k; "circle": F = a + sign*sqrt(R^2 - (s + c)^2).
@@ -298,8 +300,7 @@ class RailHead:
             u_bottom = end[0] + self.side_slope * (end[1] + self.side_depth)
             return u_bottom - 0.5 * self.width
 
-        from scipy.optimize import brentq
-        p2 = brentq(miss, p1 + 1e-9, p3 - 1e-9, xtol=1e-14)
+        p2 = bracketed_root(miss, p1 + 1e-9, p3 - 1e-9, 1e-14)
         c1, c2, c3, end = chain(p2)
         return dict(p=(p1, p2, p3), c=(c1, c2, c3), end=end)
 
