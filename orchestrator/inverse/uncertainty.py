@@ -1,7 +1,10 @@
 """How well a named cause's parameters are determined: 90 % intervals, identifiability, which sensor would pin them.
 
-The interval is the wider of two linearised spreads, both in the unit cube the fit
-works in (:class:`orchestrator.inverse.selection.CauseFitter`):
+The interval is the wider of two linearised spreads — noise plus held nuisance parameters
+(1 + 3 below), and the disagreement between sensor groups (2) —, all in the unit cube the
+fit works in (:class:`orchestrator.inverse.selection.CauseFitter`). Measured on ten
+field-like benchmark passages re-diagnosed (seeds 7000/7101; truth from another model):
+26/27 intervals contain the truth, 12/27 with term 1 alone.
 
 1. **Noise** (the model is right, the residual is correlated noise)::
 
