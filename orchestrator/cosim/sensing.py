@@ -65,7 +65,8 @@ def read_sensors(model, compiled: CompiledSensors, record: dict, dt: float, high
 
     Read in blocks of :data:`SENSOR_BLOCK` output steps (a record of some columns as it is:
     ``sensor_signals(columns=...)``; one of all columns as full-width rows); displacement
-    sensors are then reconstructed from their accelerometer's whole signal (:func:`track.sensors.displacement_from_acceleration`),
+    sensors are then reconstructed from their accelerometer's whole signal
+    (:func:`track.sensors.displacement_from_acceleration`),
     as :func:`track.sensors.sensor_signals` does in one go.
 
     Parameters

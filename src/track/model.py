@@ -527,7 +527,8 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
 
     t1 = time.perf_counter()
     f_modes = params.reduction.mode_factor * params.reduction.f_cut
-    roms = [_reduce_cached(s.fom, s.boundary, f_modes, stats, cache_dir) if s.boundary is not None else _solid_rom(s.fom)
+    roms = [_reduce_cached(s.fom, s.boundary, f_modes, stats, cache_dir) if s.boundary is not None
+            else _solid_rom(s.fom)
             for s in specs]
     stats.t_reduction = time.perf_counter() - t1
 

@@ -84,7 +84,7 @@ def body_response_history(model: TrackModel, body: str, q: np.ndarray, load_x: n
         # G (nt, ndof): each step's loads on the full dofs (F times the shape weights of its element)
         G = sp.csr_matrix(((load_f[t, i][:, None] * w).ravel(),
                            (np.repeat(t, 4), (2 * e[:, None] + np.arange(4)).ravel())), shape=(len(q), b.fom.ndof))
-        u += G @ residual_flexibility(b.rom)       # symmetric (ndof, ndof), once per body: column j, a unit load on dof j
+        u += G @ residual_flexibility(b.rom)   # symmetric (ndof, ndof), once per body: column j, a unit load on j
     return BodyResponse(coord=b.coords(), w=u[..., 0::2], moment=b.fom.nodal_moments(u))
 
 
