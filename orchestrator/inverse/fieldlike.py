@@ -200,6 +200,13 @@ class FieldCase:
         return {"family": self.family, "seed": self.seed, "effects": [e.as_dict() for e in self.effects],
                 "mismatch": asdict(self.mismatch), "chain": asdict(self.chain) if self.chain else None}
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "FieldCase":
+        """The case of an :meth:`as_dict` dict (e.g. a benchmark's ``case.json``)."""
+        return cls(d["family"], int(d["seed"]),
+                   tuple(Effect(e["cause"], e["sleeper"], dict(e["parameters"])) for e in d["effects"]),
+                   Mismatch(**d["mismatch"]), Chain(**d["chain"]) if d.get("chain") else None)
+
 
 # ------------------------------------------------------------------------------------------ the sensor chain
 def ar1(rng: np.random.Generator, n: int, phi: float, std: float) -> np.ndarray:
