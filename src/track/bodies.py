@@ -37,11 +37,16 @@ def mesh_line(length: float, points: np.ndarray, h_max: float) -> np.ndarray:
     """
     pts = np.concatenate([[0.0, length], np.clip(np.asarray(points, float), 0.0, length)])
     pts = np.unique(np.round(pts / DUPLICATE_TOL) * DUPLICATE_TOL)
-    nodes = [pts[:1]]
-    for a, b in zip(pts[:-1], pts[1:]):
-        n = max(1, int(np.ceil((b - a) / h_max - 1e-9)))
-        nodes.append(np.linspace(a, b, n + 1)[1:])
-    return np.concatenate(nodes)
+    a, b = pts[:-1], pts[1:]
+    n = np.maximum(1, np.ceil((b - a) / h_max - 1e-9).astype(np.int64))   # elements per interval
+    # interval i gets a + k (b - a) / n for k = 1 .. n - 1 and b itself: np.linspace(a, b, n + 1)[1:]
+    # term by term (same operations, so the same nodes to the bit), for all intervals at once
+    i = np.repeat(np.arange(a.size), n)
+    k = np.arange(i.size) - np.repeat(np.cumsum(n) - n, n) + 1
+    inner = k * ((b - a) / n)[i] + a[i]
+    last = k == n[i]
+    inner[last] = b[i[last]]
+    return np.concatenate([pts[:1], inner])
 
 
 @dataclass
@@ -75,8 +80,10 @@ class BeamBody:
 
     def node(self, s: float) -> int:
         """Index of the node at coordinate ``s`` [m] (must be a node)."""
-        i = int(np.argmin(np.abs(self.s - s)))
-        if abs(self.s[i] - s) > 1e-5:
+        sl = self._s_list                   # the nearer of the two nodes around s (the first on a tie)
+        j = min(max(bisect_right(sl, s), 1), len(sl) - 1)
+        i = j - 1 if abs(sl[j - 1] - s) <= abs(sl[j] - s) else j
+        if abs(sl[i] - s) > 1e-5:
             raise ValueError(f"{self.name}: no node at s = {s:.6f} m")
         return i
 

@@ -66,12 +66,12 @@ FACTOR_CACHE_SIZE = 4   # matrices kept per process (each: LU + ballast rows, ~1
 
 @dataclass(eq=False)
 class _SharedFactor:
-    lu: object
+    A: object                 # the step matrix (csc)
+    lu: object = None         # its SuperLU factor: the numpy path's, made on first use (TrackIntegrator._lu)
     influence: dict = field(default_factory=dict)
     Zb: np.ndarray | None = None
     Zb_have: np.ndarray | None = None
     Zb_dofs: np.ndarray | None = None
-    new: bool = True
     # the compiled step's own factorization (track.kernel.LDLFactor) and its influence data
     ldl: object = None
     ldl_influence: dict = field(default_factory=dict)
@@ -84,7 +84,7 @@ _FACTORS: dict = {}
 
 
 def _shared_factor(A: sp.csc_matrix) -> _SharedFactor:
-    """The LU of ``A`` (SuperLU, MMD_ATA ordering), from the cache when the same matrix was seen."""
+    """The shared factorizations of ``A``, from the cache when the same matrix was seen."""
     import hashlib
 
     A.sort_indices()
@@ -94,12 +94,11 @@ def _shared_factor(A: sp.csc_matrix) -> _SharedFactor:
     key = h.hexdigest()
     hit = _FACTORS.pop(key, None)
     if hit is not None:
-        hit.new = False
         _FACTORS[key] = hit           # most recently used last
         return hit
     while len(_FACTORS) >= FACTOR_CACHE_SIZE:
         _FACTORS.pop(next(iter(_FACTORS)))
-    out = _FACTORS[key] = _SharedFactor(spla.splu(A, permc_spec="MMD_ATA", options={"SymmetricMode": True}))
+    out = _FACTORS[key] = _SharedFactor(A)
     return out
 
 
@@ -198,9 +197,6 @@ class TrackIntegrator:
         A = model.M + (1 + a) * (g * h * self._Ct + b * h * h * self._Kt)
         self.step_matrix = A.tocsc()   # M + (1+alpha)(gamma h C + beta h^2 K), constant
         shared = _shared_factor(self.step_matrix)
-        self._lu = shared.lu
-        if shared.new:
-            self.counters.factorizations += 1
         self.t0 = 0.0
         self.k = 0  # steps taken: t = t0 + k h (no accumulated round-off)
         self.q = np.array(q0, dtype=float)
@@ -214,6 +210,17 @@ class TrackIntegrator:
         r = self.F - self._Ct @ self.v - self._Kt @ self.q
         self.a = spla.spsolve(model.M.tocsc(), r)
         self.counters.factorizations += 1
+
+    @property
+    def _lu(self):
+        """The step matrix's SuperLU factor (MMD_ATA ordering; the numpy path's solves), made on
+        first use and shared by integrators of the same matrix: the compiled step has its own
+        LDL^T (track.kernel.LDLFactor) and never needs it."""
+        sh = self._shared
+        if sh.lu is None:
+            sh.lu = spla.splu(sh.A, permc_spec="MMD_ATA", options={"SymmetricMode": True})
+            self.counters.factorizations += 1
+        return sh.lu
 
     # ------------------------------------------------------------------ forces
     def _ballast_correction(self, qD: np.ndarray, vD: np.ndarray) -> np.ndarray:

@@ -239,7 +239,7 @@ class LDLFactor:
     def __init__(self, A: sp.spmatrix):
         A = sp.csc_matrix(A)
         n = A.shape[0]
-        p = np.argsort(spla.splu(A, permc_spec="MMD_AT_PLUS_A").perm_c)
+        p = fill_ordering(A)
         B = sp.csc_matrix(A[p][:, p])
         lu = spla.splu(B, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
         if not (np.array_equal(lu.perm_r, np.arange(n)) and np.array_equal(lu.perm_c, np.arange(n))):
@@ -278,6 +278,33 @@ class LDLFactor:
         ldl_solve_many(self.perm, self.Ls, self.Ld, self.Lx, self.d, np.ascontiguousarray(b), out,
                        np.empty(b.shape))
         return out
+
+
+_ORDERINGS: dict = {}
+ORDERING_CACHE_SIZE = 8   # sparsity patterns kept per process (an int64[n] each)
+
+
+def fill_ordering(A: sp.csc_matrix) -> np.ndarray:
+    """The symmetric fill-reducing permutation of :class:`LDLFactor`: SuperLU's minimum degree
+    on ``A + A^T`` (its ``perm_c``, inverted), once per sparsity pattern and process.
+
+    SuperLU has no ordering-only call, so the ordering costs a whole LU; the variants of a
+    calibration (other pad or bed stiffness) change the values of the step matrix but not its
+    pattern. The ordering depends on the pattern alone, so a cached one is the one a new LU
+    would give: the factor, and every result, is the same as without the cache.
+    """
+    A.sort_indices()
+    h = hashlib.blake2b(digest_size=20)
+    for arr in (np.array(A.shape), A.indptr, A.indices):
+        h.update(np.ascontiguousarray(arr, dtype=np.int64).tobytes())
+    key = h.hexdigest()
+    p = _ORDERINGS.get(key)
+    if p is None:
+        p = np.argsort(spla.splu(A, permc_spec="MMD_AT_PLUS_A").perm_c)
+        while len(_ORDERINGS) >= ORDERING_CACHE_SIZE:
+            _ORDERINGS.pop(next(iter(_ORDERINGS)))
+        _ORDERINGS[key] = p
+    return p.copy()
 
 
 @_njit
@@ -896,23 +923,25 @@ def element_tables(model, geometry, par: np.ndarray, tables: list | None = None)
             e1 = ne - 1 if j == len(segs) - 1 else min(max(int(np.searchsorted(s, seg.x1 - o, side="left")) - 1,
                                                            0), ne - 1)
             code = _surface_code(geometry(side, seg.body), par, tables)
-            for e in range(e0, e1 + 1):
-                L = s[e + 1] - s[e]
-                Ws = np.zeros((4, 4))
-                for p, xi in enumerate(_SAMPLE_XI):
-                    e_, w = b.point_row(s[e] + xi * L)
-                    if e_ != e:
-                        raise RuntimeError(f"{b.name}: element table does not match point_row at element {e}")
-                    Ws[p, :w.size] = w
-                start = seg.x0 if (e == e0 and j > 0) else o + s[e]
-                etab.append((start, o + s[e], L))
-                ec.append(np.linalg.solve(V, Ws).T)
-                es.append(code)
-                bodies.append(b)
-                elements.append(e)
-        ts.append(len(etab))
-    return (np.array(ts, np.int64), np.array(etab, float).reshape(-1, 3), np.array(ec, float).reshape(-1, 4, 4),
-            np.array(es, np.int64), bodies, elements)
+            el = np.arange(e0, e1 + 1)
+            L = s[el + 1] - s[el]
+            e_, w = b.point_rows((s[el, None] + _SAMPLE_XI[None, :] * L[:, None]).ravel())
+            bad = np.flatnonzero(e_.reshape(-1, 4) != el[:, None])
+            if bad.size:
+                raise RuntimeError(f"{b.name}: element table does not match point_row at element "
+                                   f"{int(el[bad[0] // 4])}")
+            tab = np.column_stack([o + s[el], o + s[el], L])
+            if j > 0:
+                tab[0, 0] = seg.x0
+            etab.append(tab)
+            ec.append(np.linalg.solve(V[None], w.reshape(-1, 4, 4)).transpose(0, 2, 1))
+            es.append(np.full(el.size, code, np.int64))
+            bodies += [b] * el.size
+            elements += el.tolist()
+        ts.append(len(elements))
+    cat = (lambda parts, shape: np.concatenate(parts).reshape(shape) if parts else np.zeros((0,) + shape[1:]))
+    return (np.array(ts, np.int64), cat(etab, (-1, 3)), cat(ec, (-1, 4, 4)), cat(es, (-1,)).astype(np.int64),
+            bodies, elements)
 
 
 def _stack_tables(tables: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -54,6 +54,7 @@ Near ``x = 0`` the closure and stock rails of the two routes would coincide.
 """
 from __future__ import annotations
 
+import functools
 import math
 import re
 from dataclasses import dataclass
@@ -107,6 +108,7 @@ BEARER_LENGTH_STEP = 0.1  # m, bearer lengths are manufactured in 0.1 m steps
 MIN_SEATS_PER_BODY = 2  # a beam body needs two supports to be a statically stable body
 PLAN_STEP = 0.1  # m, sampling step of the plan-view polylines (chord sag < 3e-6 m at R 500)
 MIN_SLEEPERS = 4
+LAYOUT_CACHE_SIZE = 16  # layouts kept per process (build_layout): a few hundred kB each
 _ROOT_XTOL = 1e-12  # m, root tolerance (track.roots): far below any geometric tolerance that matters
 
 _CROSSING_RE = re.compile(r"^\s*1\s*:\s*([0-9]+(?:\.[0-9]*)?)\s*$")
@@ -557,6 +559,15 @@ def build_layout(p: LayoutParams) -> Layout:
     ValueError
         For invalid parameters; the message starts with the parameter's name.
     """
+    return _build_layout_cached(p)
+
+
+@functools.lru_cache(maxsize=LAYOUT_CACHE_SIZE)
+def _build_layout_cached(p: LayoutParams) -> Layout:
+    """:func:`build_layout`, once per parameter set and process: a sweep, a diagnosis or a
+    calibration builds the same layout for every run (~15 ms of a turnout's root finding,
+    twice a run: the master's passage and the track model). The result is shared, so a
+    :class:`Layout` is never changed after it is built (frozen; no caller writes into it)."""
     _validate(p)
     if p.type == "plain":
         return _build_plain(p)

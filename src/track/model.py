@@ -95,6 +95,19 @@ class Body:
         weights on the solid's 2 path nodes (:meth:`SolidCrossing.path_row`)."""
         return self.fom.path_row(s) if self.solid else self.fom.shape_row(s)
 
+    def point_rows(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`point_row` for an array of body coordinates ``s`` [m], shape (k,): elements (k,)
+        and weights (k, 4) (the solid's 2 linear weights in the first two columns)."""
+        s = np.asarray(s, dtype=float)
+        if not self.solid:
+            return self.fom.shape_rows(s)
+        cs = self.fom.contact_s
+        e = np.clip(np.searchsorted(cs, s, side="right") - 1, 0, cs.size - 2)
+        t = np.clip((s - cs[e]) / (cs[e + 1] - cs[e]), 0.0, 1.0)
+        w = np.zeros((s.size, 4))
+        w[:, 0], w[:, 1] = 1.0 - t, t
+        return e, w
+
     def residual_block(self, element: int) -> np.ndarray:
         """The 4x4 residual flexibility [m/N] of a beam element's dofs (computed once, cached);
         zeros for the solid (no residual flexibility on its retained path nodes)."""

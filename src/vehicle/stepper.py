@@ -32,6 +32,23 @@ HOLDS = ("zoh", "foh")
 MAX_CACHED_STEPS = 8  # discretisations kept when the step size changes back and forth
 
 
+
+_EXPM: dict = {}
+
+
+def _expm_rows(S: np.ndarray, rows: int) -> np.ndarray:
+    """The first ``rows`` rows of ``expm(S)``, once per matrix and process: the runs of a sweep
+    or a diagnosis discretise the same vehicle at the same step (several ms each)."""
+    key = (S.shape, S.tobytes(), rows)
+    G = _EXPM.get(key)
+    if G is None:
+        G = np.ascontiguousarray(sla.expm(S)[:rows, :])
+        G.setflags(write=False)
+        while len(_EXPM) >= MAX_CACHED_STEPS:
+            _EXPM.pop(next(iter(_EXPM)))
+        _EXPM[key] = G
+    return G
+
 class VehicleStepper:
     """Advance a linear vehicle by fixed communication steps with exact discretisation.
 
@@ -122,12 +139,12 @@ class VehicleStepper:
             S = np.zeros((n2 + m + 1, n2 + m + 1))
             S[:n2, :n2] = self._A * h
             S[:n2, n2:] = inputs * h
-            return np.ascontiguousarray(sla.expm(S)[:n2, :])
+            return _expm_rows(S, n2)
         S = np.zeros((n2 + 2 * m + 1, n2 + 2 * m + 1))
         S[:n2, :n2] = self._A * h
         S[:n2, n2:n2 + m + 1] = inputs * h
         S[n2:n2 + m, n2 + m + 1:] = np.eye(m)
-        return np.ascontiguousarray(sla.expm(S)[:n2, :])
+        return _expm_rows(S, n2)
 
     # ------------------------------------------------------------------ step
     def step(self, Fz=None) -> None:
