@@ -29,8 +29,18 @@ read defensively (``answer`` kind, a list of named causes, intervals are read wi
 Every case's truth and answer go to ``OUT/rows.jsonl`` (``--report-only`` rebuilds the
 tables from it).
 
+``--detectability``: how visible each case's effect is, independently of the diagnosis
+(:func:`orchestrator.inverse.detectability.case_detectability`: the truth with and without
+its effects through the same acquisition, the signature's energy over the case's own chain
+noise per channel, ``rho``). Computed for every case folder of ``OUT`` with a ``case.json``
+and cached there (``detect.json``, with how closely the recomputed record reproduces the
+folder's ``passage.csv``); the misses get the ratio, a per-case table lists it, and the
+single-effect share right is given over all cases and per band of the best channel's ratio
+(:data:`DETECT_BANDS`). With ``--report-only`` nothing is diagnosed; only missing
+``detect.json`` files are computed (two truth runs a case, four for two effects).
+
 Run: python benchmarks/bench_diagnose_field.py [--seeds 3] [--families a,b,...] [--workers 2] [--record]
-     [--stage all|synth|diagnose] [--report-only] [--out DIR]
+     [--stage all|synth|diagnose] [--report-only] [--detectability] [--out DIR]
 """
 from __future__ import annotations
 
@@ -48,8 +58,11 @@ import numpy as np
 
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario
 from orchestrator.inputs.sensor_layout import layout_of
+from orchestrator.inputs.measured import read_measured
+from orchestrator.inverse.detectability import case_detectability
 from orchestrator.inverse.diagnose import diagnose
-from orchestrator.inverse.fieldlike import FAMILIES, SLOW_FAMILIES, draw_case, instrumented_sleepers, synthesize_case
+from orchestrator.inverse.fieldlike import (FAMILIES, SLOW_FAMILIES, FieldCase, draw_case, instrumented_sleepers,
+                                            synthesize_case)
 from orchestrator.inverse.jsonable import numpy_default
 
 SCENARIO = bundled_scenario("measurement/crossing_quarter_120.yaml")
@@ -59,6 +72,9 @@ MAX_AMBIGUITY_OFF = 3   # ... for an effect beyond the sensors (the edge sleeper
 NEAR = 1                # sleepers between an `unexplained` location and an off-sensor effect, at most
 GAIN_MIN, GAIN_MIN_MISMATCH = 0.80, 0.50   # the acceptance's gains without / with model-form mismatch
 SEED0 = 7000            # seed of the k-th case of a family: SEED0 + 101 k (draw_case mixes in the family)
+DETECT_VERSION = 2      # of detect.json's content: a cached file of another version is computed anew
+DETECT_BANDS = (0.25, 1.0)   # edges of the bands of the best channel's rho: fixed in the task (issue 14's
+#                              detectability brief) before any case's ratio was computed, not fitted to the cases
 
 
 # ------------------------------------------------------------------------------------------ reading an answer
@@ -331,6 +347,170 @@ def run_all(families, seeds: int, workers: int, out: Path, stage: str = "all") -
     return rows
 
 
+# ------------------------------------------------------------------------------------------ detectability
+def passage_deviation(path: Path, det, case: FieldCase, types: dict) -> float:
+    """Largest |passage - (noise-free record + noise)| of any channel, / that channel's std (the faulty channel's
+    offset, a constant, removed first); ~1e-9 (the CSV's 12 digits, against a std well below the channel's peak) when
+    the truth recomputed now is the one that wrote the passage, ``inf`` when the records' times differ."""
+    data = read_measured(path, types)
+    t = det.t - det.t[0] + case.chain.trigger
+    if data.t.shape != t.shape or not np.allclose(data.t, t, rtol=0, atol=1e-9):
+        return float("inf")
+    worst = 0.0
+    for sid, x in data.channels.items():
+        r = x - det.clean[sid] - det.noise[sid]
+        if sid == case.chain.gain_channel:
+            r = r - r.mean()
+        worst = max(worst, float(np.max(np.abs(r)) / (float(np.std(x)) or 1.0)))
+    return worst
+
+
+def detect_case(sc, folder: Path, types: dict) -> tuple[dict, bool]:
+    """The detectability of a case folder's ``case.json`` and whether it was computed now: its ``detect.json``
+    when that is for the same case, else two (or four) truth runs, written there."""
+    truth = json.loads((folder / "case.json").read_text())
+    cache = folder / "detect.json"
+    if cache.is_file():
+        old = json.loads(cache.read_text())
+        if old.get("case") == truth and old.get("version") == DETECT_VERSION:
+            return old, False
+    case = FieldCase.from_dict(truth)
+    t0 = time.perf_counter()
+    det = case_detectability(sc, case)
+    passage = folder / "passage.csv"
+    out = {"case": truth, "version": DETECT_VERSION, **det.as_dict(), "wall": time.perf_counter() - t0,
+           "passage_deviation": passage_deviation(passage, det, case, types) if passage.is_file() else None}
+    cache.write_text(json.dumps(out, indent=1, default=numpy_default))
+    return out, True
+
+
+def detect_all(out: Path, families) -> dict:
+    """(family, seed) -> the detectability of every case folder of ``out`` that has a ``case.json`` of one of
+    ``families``."""
+    sc = load_scenario(SCENARIO)
+    types = layout_of(sc).types
+    found = {}
+    for folder in sorted(p.parent for p in out.glob("*/case.json")):
+        if json.loads((folder / "case.json").read_text())["family"] not in families:
+            continue
+        d, computed = detect_case(sc, folder, types)
+        found[(d["case"]["family"], d["case"]["seed"])] = d
+        if computed:
+            t = d["total"]
+            print(f"{folder.name:32s} detectability: max rho {_rho(t['max_rho'])} ({t['max_channel']}), mean "
+                  f"{_rho(t['mean_rho'])}, passage reproduced to {_rho(d['passage_deviation'])}, {d['wall']:.1f} s",
+                  flush=True)
+    return found
+
+
+def _rho(x) -> str:
+    return "-" if x is None else "inf" if x == float("inf") else f"{x:.2g}" if x < 0.01 else f"{x:.3g}"
+
+
+def _band(x: float) -> int:
+    """Index of the band of :data:`DETECT_BANDS` that holds ``x``."""
+    return int(np.searchsorted(DETECT_BANDS, x, side="right"))
+
+
+def _band_label(i: int) -> str:
+    edges = (None, *DETECT_BANDS, None)
+    lo, hi = edges[i], edges[i + 1]
+    return f"max rho < {hi:g}" if lo is None else f"max rho >= {lo:g}" if hi is None else f"{lo:g} <= max rho < {hi:g}"
+
+
+def _per_effect(d: dict) -> str:
+    return "; ".join(f"{e['alone']['label'].removesuffix(' alone')}: {_rho(e['alone']['max_rho'])} / "
+                     f"{_rho(e['marginal']['max_rho'])}" for e in d.get("effects") or [])
+
+
+def _max_free(t: dict) -> str:
+    return "-" if t.get("max_channel_free") is None else f"{_rho(t['max_rho_free'])} ({t['max_channel_free']})"
+
+
+def detect_table(rows: list[dict], detect: dict) -> str:
+    """Markdown: one line per case (family, seed, answer, right?, the best channel's, the mean and the median
+    rho, the best channel's nuisance-free rho, per effect of two)."""
+    lines = ["| family | seed | answer | right | max rho (channel) | mean rho | median rho | max rho_free (channel) "
+             "| per effect: max rho alone / given the other | passage reproduced to |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    by_case = {(r["family"], r["seed"]): r for r in rows}
+    keys = list(dict.fromkeys([k for k in by_case if k in detect] + sorted(detect)))
+    for key in keys:
+        r, d = by_case.get(key), detect[key]
+        t = d["total"]
+        answer, right = (r["label"], "yes" if r["right"] else "**no**") if r else ("not diagnosed", "-")
+        lines.append(f"| {key[0]} | {key[1]} | {answer} | {right} | {_rho(t['max_rho'])} ({t['max_channel']}) | "
+                     f"{_rho(t['mean_rho'])} | {_rho(t['median_rho'])} | {_max_free(t)} | {_per_effect(d)} | "
+                     f"{_rho(d['passage_deviation'])} |")
+    return "\n".join(lines)
+
+
+def band_rates(rows: list[dict], detect: dict) -> list[str]:
+    """The single-effect share right over all cases and per band of the best channel's rho (and rho_free)."""
+    single = [r for r in rows if len(r["truth"]["effects"]) == 1]
+    out = [f"- single effects right, all cases (the acceptance's figure): {sum(r['right'] for r in single)}/"
+           f"{len(single)}" + (f" = {100 * sum(r['right'] for r in single) / len(single):.0f} %" if single else "")]
+    known = [r for r in single if (r["family"], r["seed"]) in detect]
+    if len(known) < len(single):
+        out.append(f"- {len(single) - len(known)} single-effect case(s) have no detectability (no case folder)")
+    for key, what in (("max_rho", "rho"), ("max_rho_free", "rho_free (the same band edges)")):
+        out.append(f"- by the best channel's {what}" + (" (band edges " + ", ".join(f"{b:g}" for b in DETECT_BANDS)
+                   + ": chosen before any case's ratio was computed — ratios a factor of 4 apart around 1, "
+                   "not thresholds fitted to which cases were right)" if key == "max_rho" else "") + ":")
+        out += _band_lines(known, detect, key)
+    return out
+
+
+def _band_lines(known: list[dict], detect: dict, key: str) -> list[str]:
+    out = []
+    for i in range(len(DETECT_BANDS) + 1):
+        mine = [r for r in known if _band(detect[(r["family"], r["seed"])]["total"][key]) == i]
+        right = sum(r["right"] for r in mine)
+        missed = ", ".join(f"{r['family']} {r['seed']}" for r in mine if not r["right"])
+        out.append(f"  - {_band_label(i).replace('max rho', 'max ' + key.removeprefix('max_'))}: "
+                   f"right {right}/{len(mine)}"
+                   + (f" = {100 * right / len(mine):.0f} %" if mine else "")
+                   + (f" (misses: {missed})" if missed else ""))
+    return out
+
+
+def order_lines(rows: list[dict], detect: dict) -> list[str]:
+    """The single-effect cases in increasing order of a summary ratio, misses in bold: does it sort them apart?"""
+    single = [r for r in rows if len(r["truth"]["effects"]) == 1 and (r["family"], r["seed"]) in detect]
+    out = []
+    for key in ("max_rho", "median_rho", "max_rho_free"):
+        ranked = sorted(single, key=lambda r: detect[(r["family"], r["seed"])]["total"][key])
+        places = [i + 1 for i, r in enumerate(ranked) if not r["right"]]
+        out.append(f"- single-effect cases in increasing {key.replace('_', ' ')}: the misses are places "
+                   f"{', '.join(map(str, places))} of {len(ranked)}" + (" — " + ", ".join(
+                       f"{'**' if not r['right'] else ''}{_rho(detect[(r['family'], r['seed'])]['total'][key])}"
+                       f"{'**' if not r['right'] else ''}" for r in ranked) if ranked else ""))
+    return out
+
+
+def detect_report(rows: list[dict], detect: dict) -> str:
+    """The detectability section: band rates, misses with their ratios, the per-case table."""
+    out = ["Detectability of each case's effect (orchestrator/inverse/detectability.py; rho = energy of the "
+           "effect's noise-free signature / energy of the case's chain noise, per channel; independent of the "
+           "diagnosis):", ""]
+    out += band_rates(rows, detect)
+    out += order_lines(rows, detect)
+    out += ["", "Misses with their ratios (family, seed: truth -> answer; max rho (channel), mean rho):", ""]
+    for r in rows:
+        if not r["right"]:
+            d = detect.get((r["family"], r["seed"]))
+            ratio = f"max rho {_rho(d['total']['max_rho'])} ({d['total']['max_channel']}), mean " \
+                f"{_rho(d['total']['mean_rho'])}" + (f"; per effect {_per_effect(d)}" if d.get("effects") else "") \
+                if d else "no detectability"
+            out.append(f"- {r['family']}, seed {r['seed']}: {_truth_text(r['truth'])} -> {_answer_text(r['answer'])}; "
+                       f"{ratio}")
+    devs = [d["passage_deviation"] for d in detect.values() if d.get("passage_deviation") is not None]
+    if devs:
+        out += ["", f"The recomputed truth reproduces the cases' passage.csv to at most {_rho(max(devs))} of a "
+                    f"channel's std ({len(devs)} passages; the CSV keeps 12 digits)."]
+    return "\n".join(out + ["", detect_table(rows, detect)])
+
+
 # ------------------------------------------------------------------------------------------ the tables
 def _pct(x) -> str:
     return "-" if x is None else f"{100 * x:.1f} %"
@@ -385,8 +565,9 @@ def _answer_text(ans: dict) -> str:
                      for c in ans["causes"])
 
 
-def summary(rows: list[dict], seeds: int, wall: float | None) -> str:
-    """The matrix, the share right per group, gains, misses, coverage, nuisance estimates."""
+def summary(rows: list[dict], seeds: int, wall: float | None, detect: dict | None = None) -> str:
+    """The matrix, the share right per group, gains, misses (with their ratio rho where ``detect`` has it),
+    coverage, nuisance estimates."""
     out = [matrix(rows), ""]
     for g in dict.fromkeys(_group(r["family"]) for r in rows):
         mine = [r for r in rows if _group(r["family"]) == g]
@@ -415,13 +596,18 @@ def summary(rows: list[dict], seeds: int, wall: float | None) -> str:
     out.append(f"- diagnoses that ended in an exception: {len(errors)}/{len(rows)}")
     out += ["", "Misses (family, seed: truth -> answer, gain):", ""]
     out += [f"- {r['family']}, seed {r['seed']}: {_truth_text(r['truth'])} -> {_answer_text(r['answer'])}, "
-            f"gain {_pct(r['answer']['gain'])}" for r in rows if not r["right"]] or ["- none"]
+            f"gain {_pct(r['answer']['gain'])}" + _rho_note(detect, r) for r in rows if not r["right"]] or ["- none"]
     runs = [r["runs"] for r in rows if r["runs"]]
     wall = wall or sum(r["wall"] for r in rows)      # --report-only: the diagnoses' own wall times
     out += ["", f"{len(rows)} diagnoses ({seeds} seed(s) per family) in {wall / 60:.1f} min"
             + (f"; median {float(np.median([r['wall'] for r in rows])):.0f} s and {int(np.median(runs))} runs each"
                if runs else "")]
     return "\n".join(out)
+
+
+def _rho_note(detect: dict | None, r: dict) -> str:
+    d = (detect or {}).get((r["family"], r["seed"]))
+    return f"; max rho {_rho(d['total']['max_rho'])} ({d['total']['max_channel']})" if d else ""
 
 
 def main() -> None:
@@ -434,6 +620,8 @@ def main() -> None:
     ap.add_argument("--record", action="store_true", help="append the result to benchmarks/RESULTS.md")
     ap.add_argument("--report-only", action="store_true", help="tables from OUT/rows.jsonl, no runs")
     ap.add_argument("--note", default="", help="a line recorded under the command (with --record)")
+    ap.add_argument("--detectability", action="store_true",
+                    help="the effect's signature-to-noise ratio of every case folder in OUT (cached in detect.json)")
     ap.add_argument("--stage", choices=("all", "synth", "diagnose"), default="all",
                     help="synth: write the passages only; diagnose: diagnose those an earlier synth wrote")
     args = ap.parse_args()
@@ -450,17 +638,31 @@ def main() -> None:
         wall = time.perf_counter() - t0
         if args.stage == "synth":
             return
-    text = summary(rows, args.seeds, wall)
+    detect = detect_all(out, families) if args.detectability else None
+    text = summary(rows, args.seeds, wall, detect)
     print(text)
+    if detect is not None:
+        detect_text = detect_report(rows, detect)
+        print("\n" + detect_text)
     if args.record:
-        stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
-        machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+        record(args, families, detect_text if detect is not None else text, detect is not None)
+
+
+def record(args, families: list[str], text: str, detectability: bool) -> None:
+    """Append ``text`` to ``benchmarks/RESULTS.md`` under a heading with the time, the machine and the command."""
+    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    if detectability:
+        title = "Diagnosis on field-like passages: how visible each case's effect is (detectability)"
+        cmd = f"python benchmarks/bench_diagnose_field.py --report-only --detectability --out {args.out}" + (
+            f" --families {args.families}" if families != list(FAMILIES) else "")
+    else:
+        title = "Diagnosis on field-like passages: confusion matrix"
         cmd = f"python benchmarks/bench_diagnose_field.py --seeds {args.seeds} --workers {args.workers}" + (
             f" --families {args.families}" if families != list(FAMILIES) else "")
-        with Path(__file__).with_name("RESULTS.md").open("a") as f:
-            note = f"{args.note}\n\n" if args.note else ""
-            f.write(f"\n## Diagnosis on field-like passages: confusion matrix — {stamp}, {machine}\n\n`{cmd}`\n\n"
-                    f"{note}{text}\n")
+    with Path(__file__).with_name("RESULTS.md").open("a") as f:
+        note = f"{args.note}\n\n" if args.note else ""
+        f.write(f"\n## {title} — {stamp}, {machine}\n\n`{cmd}`\n\n{note}{text}\n")
 
 
 if __name__ == "__main__":

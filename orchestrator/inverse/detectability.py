@@ -38,6 +38,14 @@ part of it; the mismatch families add a model-form misfit that is in neither ``d
 ``n``. So rho ranks and groups cases by how much the data hold of their effect; it does
 not say which of them a given method must get.
 
+Two more summaries per signature, because the ratio of the best channel can come from a
+channel whose own noise is small (the chain's noise is a share of each record's std, so a
+lightly loaded pressure cell is a quiet channel): the **median** over the channels (the
+typical channel), and **rho_free**, the ratio of the part of each channel's signature that
+no offset, gain, time shift or time stretch of its no-effect record mimics
+(:func:`nuisance_free`) — the nuisances every field record has, linearised and fitted per
+channel, so a low estimate of what survives them. Neither uses the diagnosis.
+
 For cases with two or more effects each effect also gets its signatures, computed from the
 same runs: *alone* (only that effect vs none) and *marginal* (all effects vs all but that
 one: what the data hold of it given the others). With two effects, one effect's
@@ -68,16 +76,25 @@ class Signature:
         Channel id -> the signature ``s_with - s_without`` at the acquisition times (SI units).
     rho : dict
         Channel id -> ``sum(d_c^2) / sum(n_c^2)``.
+    rho_free : dict
+        Channel id -> the same ratio for the part of ``d_c`` that no gain, offset, time
+        shift or time stretch of the channel's no-effect record mimics (:func:`nuisance_free`).
     """
 
     label: str
     d: dict = field(repr=False)
     rho: dict
+    rho_free: dict = field(default_factory=dict)
 
     @property
     def mean_rho(self) -> float:
         """Plain mean of the channels' ratios."""
         return float(np.mean(list(self.rho.values())))
+
+    @property
+    def median_rho(self) -> float:
+        """Median of the channels' ratios (the typical channel; the mean follows the best one)."""
+        return float(np.median(list(self.rho.values())))
 
     @property
     def max_channel(self) -> str:
@@ -91,9 +108,12 @@ class Signature:
 
     def as_dict(self) -> dict:
         """JSON-able summary (no arrays): label, per-channel rho and energy, mean, max and its channel."""
+        free = max(self.rho_free, key=self.rho_free.get) if self.rho_free else None
         return {"label": self.label, "rho": {c: float(v) for c, v in self.rho.items()},
                 "energy": {c: float(np.sum(x ** 2)) for c, x in self.d.items()},
-                "mean_rho": self.mean_rho, "max_rho": self.max_rho, "max_channel": self.max_channel}
+                "mean_rho": self.mean_rho, "median_rho": self.median_rho, "max_rho": self.max_rho,
+                "max_channel": self.max_channel, "rho_free": {c: float(v) for c, v in self.rho_free.items()},
+                "max_rho_free": float(self.rho_free[free]) if free else None, "max_channel_free": free}
 
 
 @dataclass(frozen=True)
@@ -171,20 +191,44 @@ def chain_noise(sampled: dict, types: dict, dt: float, highpass: float, chain: C
     return out
 
 
-def signature(label: str, with_: dict, without: dict, noise: dict) -> Signature:
+def nuisance_free(d: np.ndarray, without: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The part of a channel's signature ``d`` that no offset, gain, time shift or time stretch of the
+    channel's no-effect record ``without`` mimics (least-squares residual, linearised).
+
+    Every field record has an unknown offset and gain per channel and an unknown trigger and
+    speed (here: a shift and a stretch of the time axis). To first order they change the
+    record by ``a + b x + c x' + e (t - t_mid) x'`` (``x'`` the record's time derivative);
+    what of ``d`` lies in that span, a method must tell from them. Fitted per channel,
+    which is more freedom than a passage has (its shift and speed are common to all
+    channels): the ratio of what is left is a low estimate. Vehicle and damping
+    parameters are not removed.
+    """
+    dx = np.gradient(without, t)
+    basis = np.column_stack([np.ones_like(t), without, dx, (t - 0.5 * (t[0] + t[-1])) * dx])
+    return d - basis @ np.linalg.lstsq(basis, d, rcond=None)[0]
+
+
+def _ratio(signal: float, floor: float) -> float:
+    """``signal / floor``; 0 without signal, ``inf`` with a signal and no noise (:func:`signature`)."""
+    return 0.0 if signal == 0.0 else signal / floor if floor > 0.0 else float("inf")
+
+
+def signature(label: str, with_: dict, without: dict, noise: dict, t: np.ndarray | None = None) -> Signature:
     """The signature ``with_ - without`` per channel and its energy ratio to ``noise``.
 
     A channel the effects leave exactly as it was has ratio 0; one they change where the
     noise is zero has ratio ``inf`` (a pressure cell under a void whose sleeper never
     touches the ballast: its record is all zeros, and the chain's noise, a share of the
-    record's std, is zero too).
+    record's std, is zero too). With the times ``t`` also the ratio of the signature's
+    nuisance-free part (:func:`nuisance_free`).
     """
     d = {sid: with_[sid] - without[sid] for sid in with_}
-    rho = {}
-    for sid, x in d.items():
-        signal, floor = float(np.sum(x ** 2)), float(np.sum(noise[sid] ** 2))
-        rho[sid] = 0.0 if signal == 0.0 else signal / floor if floor > 0.0 else float("inf")
-    return Signature(label, d, rho)
+    floor = {sid: float(np.sum(noise[sid] ** 2)) for sid in d}
+    rho = {sid: _ratio(float(np.sum(x ** 2)), floor[sid]) for sid, x in d.items()}
+    free = {} if t is None else {
+        sid: _ratio(float(np.sum(nuisance_free(x, without[sid], t) ** 2)) if np.any(x) else 0.0, floor[sid])
+        for sid, x in d.items()}
+    return Signature(label, d, rho, free)
 
 
 def effect_label(effect) -> str:
@@ -261,15 +305,16 @@ def case_detectability(scenario, case: FieldCase, crop: float = 0.01, progress=N
     sampled = {s: sample_signals(r, layout, t_acq) for s, r in runs.items()}
     clean = {s: noise_free(x, layout.types, dt, hp, case.chain) for s, x in sampled.items()}
     noise = chain_noise(sampled[full], layout.types, dt, hp, case.chain)
-    total = signature("all effects" if case.effects else "no effect", clean[full], clean[None], noise)
+    total = signature("all effects" if case.effects else "no effect", clean[full], clean[None], noise, t_acq)
     per_effect = []
     if len(case.effects) >= 2:
         for i, e in enumerate(case.effects):
             rest = tuple(j for j in full if j != i)
-            per_effect.append((signature(f"{effect_label(e)} alone", clean[(i,)], clean[None], noise),
-                               signature(f"{effect_label(e)} given the others", clean[full], clean[rest], noise)))
+            per_effect.append((signature(f"{effect_label(e)} alone", clean[(i,)], clean[None], noise, t_acq),
+                               signature(f"{effect_label(e)} given the others", clean[full], clean[rest], noise,
+                                         t_acq)))
     return Detectability(t_acq, noise, clean[full], total, tuple(per_effect))
 
 
 __all__ = ["Signature", "Detectability", "case_detectability", "noise_free", "chain_noise", "signature",
-           "effect_label"]
+           "nuisance_free", "effect_label"]
