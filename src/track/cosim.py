@@ -33,7 +33,7 @@ import numpy as np
 
 from .contact import HERTZ_CONSTANT, CrossingGeometry, DippedJoint, Flat, TableGeometry, hertz_deflection
 from .dynamics import ALPHA_DEFAULT, Counters, PointLoad, TrackIntegrator
-from .kernel import CompiledContacts, kernel_enabled
+from .kernel import CompiledContacts, kernel_enabled, record_row
 from .model import TrackModel, build_track
 from .params import TrackParams
 from .statics import static_equilibrium
@@ -111,6 +111,14 @@ class Record:
             if self.n:
                 data[name][:self.n] = self._data[name][:self.n]
         self._data = data
+        # record_row's arguments: per state field its columns (all n for None, none when not
+        # recorded) and its array (a dummy without columns when not recorded)
+        none, dummy = np.zeros(0, np.int64), np.empty((1, 0))
+        cols = [none if name not in self.columns else
+                np.arange(self.n_dofs, dtype=np.int64) if self.columns[name] is None else
+                self.columns[name].astype(np.int64) for name in STATE_FIELDS]
+        dst = [data[name] if name in self.columns else dummy for name in STATE_FIELDS]
+        self._args = (*cols, data["t"], data["x"], data["Fz"], data["parts"], *dst)
 
     @property
     def capacity(self) -> int:
@@ -130,15 +138,8 @@ class Record:
         """Write one row: time [s], states (n,), wheel x [m], Fz [N], parts (m, 2) [N]."""
         if self.n == self.capacity:
             self._allocate(2 * self.capacity)
-        d, j = self._data, self.n
-        for name, value in zip(STATE_FIELDS, (q, v, a)):
-            if name in self.columns:
-                cols = self.columns[name]
-                if cols is None:
-                    d[name][j] = value
-                else:
-                    np.take(value, cols, out=d[name][j])
-        d["t"][j], d["x"][j], d["Fz"][j], d["parts"][j] = t, x, Fz, parts
+        j = self.n
+        record_row(j, t, x, Fz, parts, q, v, a, *self._args)
         self.n = j + 1
 
     def truncate(self, n: int) -> None:

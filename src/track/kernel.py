@@ -184,6 +184,25 @@ crossing_heights_nb = _njit(crossing_heights)
 joint_heights_nb = _njit(joint_heights)
 
 
+@_njit
+def record_row(j, t, x, Fz, parts, q, v, a, cq, cv, ca, dt, dx, dFz, dparts, dq, dv, da):
+    """Row ``j`` of a state record (:class:`track.cosim.Record`) in one call: the time, the
+    wheels' ``x``, ``Fz`` and ``parts`` (m, 2), and the columns ``cq``, ``cv``, ``ca`` of the
+    states (an empty column list: the field is not recorded)."""
+    dt[j] = t
+    for i in range(x.size):
+        dx[j, i] = x[i]
+        dFz[j, i] = Fz[i]
+        dparts[j, i, 0] = parts[i, 0]
+        dparts[j, i, 1] = parts[i, 1]
+    for k in range(cq.size):
+        dq[j, k] = q[cq[k]]
+    for k in range(cv.size):
+        dv[j, k] = v[cv[k]]
+    for k in range(ca.size):
+        da[j, k] = a[ca[k]]
+
+
 # ------------------------------------------------------------------------------- matrices
 def prune(X: sp.spmatrix, rtol: float = PRUNE_RTOL) -> sp.csr_matrix:
     """``X`` without the entries below ``rtol * sqrt(|X_ii X_jj|)`` (module doc), as CSR.
