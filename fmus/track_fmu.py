@@ -185,6 +185,9 @@ def resource_payload(params: "_params.TrackParams", n_wheels: int, sensors: Sequ
     return json.dumps(payload, indent=1).encode("utf-8")
 
 
+WHEEL_OUTPUTS = ("Fz", "Fz_coupling", "Fz_rail", "Fz_nose", "rail_z")   # per wheel, in get_real's bulk order
+
+
 class StepSizeError(ValueError):
     """A communication step differs from the first one (the track FMU is fixed-step)."""
 
@@ -286,6 +289,10 @@ class Track(CosimSlave):
         self._add_wheel_ports()
         self._add_counter_outputs()
         self._add_sensor_outputs()
+        # the wheel outputs' value references -> position in _wheel_values (get_real's bulk read)
+        order = {f"wheel{i + 1}_{k}": j * self._n + i for j, k in enumerate(WHEEL_OUTPUTS) for i in range(self._n)}
+        self._wheel_slot = {v.value_reference: order[v.name] for v in self.vars.values() if v.name in order}
+        self._bulk: dict = {}     # tuple of value references -> slots (None: not all of them wheel outputs)
 
     def _read_baked(self) -> None:
         """The baked resource file: track parameters, sensors, wheel count and the parameters'
@@ -487,6 +494,22 @@ class Track(CosimSlave):
         def set_(value):
             array[i] = value
         return (lambda: float(array[i])), set_
+
+    def get_real(self, vrs):
+        """The Real variables ``vrs``; a read of wheel outputs only (what a master reads every step)
+        takes them from one vector, the same values as their getters (:meth:`_output`) give."""
+        key = tuple(vrs)
+        slots = self._bulk.get(key, False)
+        if slots is False:
+            slots = (np.array([self._wheel_slot[vr] for vr in key], np.intp)
+                     if key and all(vr in self._wheel_slot for vr in key) else None)
+            if len(self._bulk) < 8:
+                self._bulk[key] = slots
+        c = self._cosim
+        if slots is None or c is None:
+            return super().get_real(vrs)
+        values = np.concatenate([c.Fz, c.Fz_coupling, c.parts[:, 0], c.parts[:, 1], c.rail_w])
+        return values[slots].tolist()
 
     def _output(self, which: str, i: int) -> float:
         c = self._cosim

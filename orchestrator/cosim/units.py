@@ -322,7 +322,7 @@ class FmuTrack:
 
     def outputs(self):
         o, n = self._read(), self.n
-        return o[n:2 * n], np.stack([o[2 * n:3 * n], o[3 * n:4 * n]], axis=1), o[4 * n:]
+        return o[n:2 * n], o[2 * n:4 * n].reshape(2, n).T, o[4 * n:]   # views of this step's copy
 
     def work(self) -> dict:
         """The track FMU's work counters and wall times [s] (its monitoring outputs), as read at
