@@ -60,6 +60,7 @@ round-off they already carry.
 from __future__ import annotations
 
 import hashlib
+import inspect
 import os
 
 import numpy as np
@@ -876,6 +877,12 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     return OK, change
 
 
+# where CompiledContacts' argument list of contact_step takes the state (q0 v0 acc0 F0 Fc0), the
+# wheels (x zw) and the outputs (q1 v1 acc1 F1 Fc1 out) at each step
+CONTACT_STEP_PARAMETERS = tuple(inspect.signature(getattr(contact_step, "py_func", contact_step)).parameters)
+_STEP_SLOTS = tuple(CONTACT_STEP_PARAMETERS.index(name) for name in ("q0", "x", "q1"))
+
+
 # ------------------------------------------------------------------------------- element tables
 _SAMPLE_XI = np.array([0.125, 0.375, 0.625, 0.875])   # interior points: each lies in its own element
 
@@ -1065,6 +1072,22 @@ class CompiledContacts:
         self.work = np.empty(nw)
         self.iwork = np.empty(niw, np.int64)
         self.wts = np.zeros((m, nrmax))
+        self._args = self._argument_list()
+
+    def _argument_list(self) -> list:
+        """contact_step's arguments; :meth:`step` fills the slots of :data:`_STEP_SLOTS` each step
+        (the state, the wheels, the outputs), the rest are this object's arrays, fixed."""
+        f, sh = self.f, self._sh
+        args = [self.par, self.cnt, None, None, None, None, None, self.model.f_gravity,
+                *self._K, *self._C, *self._bal, sh.ldl_Zb, sh.ldl_have,
+                f.perm, f.Ls, f.Ld, f.Lx, f.d,
+                None, None, self.wside, *self._tables, self.ent,
+                self.T, self.gd, self.nr, self.R, self.Ze, self.E, self.fresh,
+                None, None, None, None, None, None, self.W, self.surf, self.wts, self.work, self.iwork,
+                self.yw, *self._contact_tables, self.chw]
+        if len(args) != len(CONTACT_STEP_PARAMETERS):
+            raise RuntimeError(f"contact_step takes {len(CONTACT_STEP_PARAMETERS)} arguments, the list has {len(args)}")
+        return args
 
     # ------------------------------------------------------------------ wheels
     def influence_rows(self, body, e: int) -> np.ndarray:
@@ -1119,17 +1142,13 @@ class CompiledContacts:
         self.par[P_CH] = c_h
         cnt = self.cnt
         cnt[:] = 0
-        f, sh = self.f, self._sh
-        ts, etab, ec, es = self._tables
+        args = self._args
+        s0, sx, sn = _STEP_SLOTS
+        args[s0:s0 + 5] = it.q, it.v, it.a, it.F, Fc0
+        args[sx:sx + 2] = x, zw
+        args[sn:sn + 6] = new[0], new[1], new[2], new[3], Fc1, out
         while True:
-            status, change = contact_step(
-                self.par, cnt, it.q, it.v, it.a, it.F, Fc0, self.model.f_gravity,
-                *self._K, *self._C, *self._bal, sh.ldl_Zb, sh.ldl_have,
-                f.perm, f.Ls, f.Ld, f.Lx, f.d,
-                x, zw, self.wside, ts, etab, ec, es, self.ent,
-                self.T, self.gd, self.nr, self.R, self.Ze, self.E, self.fresh,
-                new[0], new[1], new[2], new[3], Fc1, out, self.W, self.surf, self.wts, self.work, self.iwork,
-                self.yw, *self._contact_tables, self.chw)
+            status, change = contact_step(*args)
             if status != NEED_ELEMENT:
                 break
             for i in np.flatnonzero(self.ent[0] != self.ent[1]).tolist():
