@@ -21,13 +21,28 @@ module that applies it):
    :mod:`orchestrator.inverse.significance` — significant on the effective sample size,
    removes at least a quarter of the explainable misfit, never makes the fit worse, and
    holds with any sensor group held out. Candidates within ΔBIC 10 of it on the
-   effective sample size cannot be told apart from it: its ambiguity set.
+   effective sample size cannot be told apart from it: its ambiguity set. The ranking
+   (BIC: channels weighted by their effective samples) and the share (J: groups weighted
+   equally) can disagree, so the named one may rank more than ΔBIC 10 below a candidate
+   that failed only the share (measured: right in two_void_pad 7000, where the void
+   removed 62 % of J and the better-ranked pad 15 %; wrong in void_sensor+mismatch 7101,
+   where the true void at 19 removed 23 % of the explainable misfit and a void at 18,
+   ranked ΔBIC 75 below it, 29 %: the floor of :mod:`orchestrator.inverse.significance`,
+   "Known limits").
 5. **Round 2, forward selection** (:func:`_second_round`): with a cause named, the
    :data:`SECOND_ROUND` candidates whose round-1 screening signals, added as a change to
    the extended model's, fit best (no runs) are screened for real on top of the
    extended model and the :data:`SECOND_CONFIRM` best of them fitted, and a second
    cause is named by the same rule relative to it (at most :data:`MAX_CAUSES`), each
-   with its own gain.
+   with its own gain. The first cause stays at its round-1 values. Two effects that
+   interact strongly are missed this way (measured, two_void_pad 7101: a void at 21
+   beside a pad 0.16x at 20): fitted alone, the void takes a shape that also stands in
+   for the pad (J 0.34; the truth's shape 0.23), on which the true pad *raises* J (on
+   the hanging uniform void of the former fit it removed 8 % of the explainable misfit),
+   and the pad's round-1 screening (on the nominal model) superposed on the void model
+   ranks it 7th of 9, not among those screened again; with the truth's void the pad
+   removes 94 % of J. Re-fitting the first cause with each second one (stepwise
+   regression's refit) would address it, at ~70 runs per void refit: not done.
 6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,
    identifiability and which sensors would pin it:
    :mod:`orchestrator.inverse.uncertainty`); else ``none`` when the residual is at the

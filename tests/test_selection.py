@@ -1,0 +1,84 @@
+"""The fit of a void candidate (:class:`orchestrator.inverse.selection.CauseFitter`) on a closed-form response.
+
+No simulation: the fitter's runs are replaced by a closed-form stand-in for a sleeper on a
+gapped bed — each of the six gap points carries ``max(0, d - u_i)`` (the part of the
+sleeper's deflection ``d`` that closes the gap ``u_i``, unit cube), so a sleeper whose
+every gap exceeds ``d`` hangs and no signal depends on the gaps (the plateau of
+``selection._wedge_starts``' docstring).
+"""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from orchestrator.inputs.causes import Candidate, kind_of
+from orchestrator.inverse.screening import Evaluated
+from orchestrator.inverse.selection import FIT_MAX_NFEV, CauseFitter
+
+DEFLECTION = 0.5                                          # d, unit cube (2 mm of the 0-4 mm gap range)
+TRUTH = np.array([0.45, 0.45, 0.6, 0.6, 0.6, 0.6])        # rests near the low-y end, hangs over four points
+
+
+def _signals(u: np.ndarray) -> np.ndarray:
+    return np.maximum(0.0, DEFLECTION - np.asarray(u, float))
+
+
+class _ClosedForm(CauseFitter):
+    """A :class:`CauseFitter` whose runs are :func:`_signals` against the truth's (no pool, no target)."""
+
+    def runs(self, us):
+        for u in us:
+            if u.tobytes() not in self.cache:
+                r = _signals(u) - _signals(TRUTH)
+                self.cache[u.tobytes()] = SimpleNamespace(chi2=float(r @ r), r=r)
+        return [self.cache[u.tobytes()] for u in us]
+
+    def residuals(self, us):
+        return [cm.r for cm in self.runs(us)]
+
+
+def _start(u: np.ndarray) -> Evaluated:
+    c = Candidate("ballast_void", 3)
+    r = _signals(u) - _signals(TRUTH)
+    return Evaluated(c, kind_of(c).from_unit(u), SimpleNamespace(chi2=float(r @ r), r=r), 1, "confirmed")
+
+
+def test_a_void_fit_leaves_a_hanging_uniform_start():
+    """A uniform gap on the plateau fits better than both one-sided wedges to its peak, but no fit can
+    leave it; the wedge fit must restart from the better wedge and end below the plateau's chi-square.
+
+    Closed form: on the plateau (every gap 0.7 > d) the residual is minus the truth's signals,
+    chi2 = 2 x 0.05^2 = 0.005; the wedge 0.45 -> 0.7 (within the two-parameter family) leaves
+    only point 2 off (gap 0.5 vs 0.45: 0.05), chi2 = 0.0025. The old start rule (the best of the
+    three starts) stayed on the plateau: chi2 0.005.
+    """
+    plateau = np.full(6, 0.7)
+    start = _start(plateau)
+    assert abs(start.cmp.chi2 - 2 * 0.05 ** 2) < 1e-12
+    fitter = _ClosedForm(pool=None, target=None, raw={}, start=start, reference=None)
+    wedges = fitter._wedge_starts(plateau, lambda p: np.linspace(p[0], p[1], 6))
+    assert np.allclose(wedges[0], [0.7, 0.7])             # the plateau does fit best of the three starts
+    fitted = fitter.fit(start, slice(0, 1), FIT_MAX_NFEV)
+    assert fitted.cmp.chi2 < 0.8 * start.cmp.chi2         # left the plateau (0.0025 in reach; 0.8: well clear of it)
+    assert fitted.values.max() > 0.0
+
+
+def test_a_void_fit_that_moves_from_its_first_start_is_not_restarted():
+    """From a start with a gradient the fit moves and the other starts are never fitted: the fitter runs
+    the two one-sided wedges (to choose the start) and exactly the points of one fit from the start
+    (consistency check against :func:`fit_unit_cube` on the same closed form)."""
+    from orchestrator.inverse.fitting import fit_unit_cube
+
+    u0 = np.linspace(0.3, 0.6, 6)
+    start = _start(u0)
+    fitter = _ClosedForm(pool=None, target=None, raw={}, start=start, reference=None)
+    fitted = fitter.fit(start, slice(0, 1), FIT_MAX_NFEV)
+    assert fitted.cmp.chi2 < start.cmp.chi2
+
+    def batch(ps):
+        return [_signals(np.linspace(p[0], p[1], 6)) - _signals(TRUTH) for p in ps]
+
+    alone = fit_unit_cube(batch, np.array([0.3, 0.6]), max_nfev=FIT_MAX_NFEV)
+    assert alone.cost < alone.cost_start
+    assert len(fitter.cache) == alone.evaluations + 2
