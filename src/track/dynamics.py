@@ -297,20 +297,23 @@ class TrackIntegrator:
     def influence(self, point: PointMap) -> np.ndarray:
         """``A^{-1} r`` of a rail point (shape (n,)): the step response to a force there.
 
-        Built from per-element columns ``A^{-1} T[dof, :]`` computed once per element
-        (4 solves when a wheel enters a beam element, 2 for a segment of the solid's
-        contact path, :meth:`track.model.Body.load_rows`).
+        Built from the columns ``A^{-1} T[dof, :]`` of the element's load rows, each computed
+        once (a beam element's 4 rows are its two nodes' dofs, a segment of the solid's contact
+        path has its two path nodes, :meth:`track.model.Body.load_rows`; a neighbour shares one
+        node's).
         """
-        key = (point.body, point.element)
-        Ze = self._influence_cache.get(key)
-        if Ze is None:
-            b = self.model.body(point.body)
-            rows = b.load_rows(point.element)        # (4, nr) beam element, (2, nr) solid path segment
-            E = np.zeros((self.model.n, rows.shape[0]))
-            E[b.gdofs, :] = rows.T
-            Ze = self._influence_cache[key] = self._lu.solve(E)
-            self.counters.solves += rows.shape[0]
-        return Ze @ point.shape
+        b, e = self.model.body(point.body), point.element
+        ids = [2 * e + j for j in range(4)] if not b.solid else [e, e + 1]   # rows of T / path nodes
+        cache = self._influence_cache          # per load row: neighbouring elements share a node's rows
+        missing = [j for j, r in enumerate(ids) if (b.name, r) not in cache]
+        if missing:
+            rows = b.load_rows(e)                # (4, nr) beam element, (2, nr) solid path segment
+            E = np.zeros((self.model.n, len(missing)))
+            E[b.gdofs, :] = rows[missing].T
+            for j, z in zip(missing, self._lu.solve(E).T):
+                cache[(b.name, ids[j])] = z
+            self.counters.solves += len(missing)
+        return np.column_stack([cache[(b.name, r)] for r in ids]) @ point.shape
 
     def _ballast_rows(self, idx: np.ndarray) -> np.ndarray:
         """``A^{-1} e_d`` as rows for the ballast bushings ``idx`` (shape (len(idx), n)).

@@ -1091,16 +1091,25 @@ class CompiledContacts:
 
     # ------------------------------------------------------------------ wheels
     def influence_rows(self, body, e: int) -> np.ndarray:
-        """``A^{-1} r`` of the load rows of element ``e`` of ``body``, shape (k, n) (cached)."""
-        key = (body.name, e)
-        Z = self._sh.ldl_influence.get(key)
-        if Z is None:
+        """``A^{-1} r`` of the load rows of element ``e`` of ``body``, shape (k, n).
+
+        Cached per load row, not per element: neighbouring elements share a node (a beam
+        element's rows are those of its two nodes' dofs, the solid's of its two path nodes),
+        so a wheel running along a body solves each row once, not twice. Every column of
+        :func:`ldl_solve_many` takes the same operations whatever the others, so a row is the
+        same to the bit however it was grouped.
+        """
+        ids = [2 * e + j for j in range(4)] if not body.solid else [e, e + 1]   # rows of T / path nodes
+        cache = self._sh.ldl_influence
+        missing = [j for j, r in enumerate(ids) if (body.name, r) not in cache]
+        if missing:
             rows = body.load_rows(e)
-            E = np.zeros((self.model.n, rows.shape[0]))
-            E[body.gdofs, :] = rows.T
-            Z = self._sh.ldl_influence[key] = np.ascontiguousarray(self.f.solve(E).T)
-            self.integ.counters.solves += rows.shape[0]
-        return Z
+            E = np.zeros((self.model.n, len(missing)))
+            E[body.gdofs, :] = rows[missing].T
+            for j, z in zip(missing, self.f.solve(E).T):
+                cache[(body.name, ids[j])] = np.ascontiguousarray(z)
+            self.integ.counters.solves += len(missing)
+        return np.stack([cache[(body.name, r)] for r in ids])
 
     def _load(self, i: int, k: int) -> None:
         """The data of table entry ``k`` (a body's element) for wheel i."""
