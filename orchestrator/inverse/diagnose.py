@@ -11,7 +11,9 @@ module that applies it):
 2. **Nuisance.** When :mod:`orchestrator.inverse.nuisance` is present, speed, time shift,
    vehicle parameters, track damping and per-channel sensor gains are fitted first
    (:func:`_nuisance`); the causes are then screened and fitted on that model and the
-   nuisance estimates are reported apart, never as a track cause.
+   nuisance estimates are reported apart, never as a track cause. Then the model's own
+   time-step error (:func:`_step_error`: the reference at half its step, one run),
+   reported where a residual above the noise lives.
 3. **Selection, round 1** (:func:`orchestrator.inverse.selection.select`): every
    candidate of the catalogue (each local cause on the sleepers carrying sensors and
    :data:`SENSOR_REACH` beyond them, the global ones) screened at the magnitudes of its
@@ -87,7 +89,7 @@ from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
 from orchestrator.inverse.selection import CONFIRM, FIT, Round, select, superposed_ranking
 from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, MIN_SHARE, NONE_MARGIN, Evidence, assess,
-                                               at_noise_level, locate)
+                                               at_noise_level, locate, step_error)
 
 SENSOR_REACH = 1     # local causes on the sleepers carrying sensors +- this many (an effect just beyond them)
 MAX_CAUSES = 2       # causes named at most (forward selection)
@@ -245,6 +247,24 @@ def _nuisance(pool: Pool, inp: _Inputs, base: Evaluated) -> tuple[dict, Evaluate
     return nz.raw, Evaluated(Candidate("none"), np.zeros(0), nz.cmp, 0, "nominal"), nz.to_json()
 
 
+def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> dict | None:
+    """Step 2b: the model's own time-step error (:func:`orchestrator.inverse.significance.step_error`).
+
+    One run: the reference at half its time step (same output step). Output: the step
+    error's JSON (``step`` [s], ``objective``, ``groups``, ``channels``) or None when that run
+    cannot be compared (dropped with its reason).
+    """
+    fine_raw = copy.deepcopy(ref_raw)
+    fine_raw["simulation"]["step"] = 0.5 * float(ref_raw["simulation"]["step"])
+    pool.expect(1)
+    run = pool.map([fine_raw])[0]
+    cmp, why = checked_comparison(inp.target, run, ref.cmp)
+    if cmp is None:
+        pool.drop("the reference at half its time step", "step error", why)
+        return None
+    return {"step": float(ref_raw["simulation"]["step"]), **step_error(ref.cmp, cmp, inp.target)}
+
+
 def _pick(rd: Round, target: Target) -> tuple[Evaluated | None, Evidence | None, dict]:
     """Step 4: the best-ranked candidate of a round that passes the rule, its evidence, and every tried one's.
 
@@ -351,16 +371,19 @@ def _named_entry(n: _Named, rnd: int, reach: tuple[int, int]) -> CauseFit:
 
 
 def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], final: Comparison,
-            best: Evidence | None) -> Answer:
+            best: Evidence | None, step_err: dict | None = None) -> Answer:
     """Step 6: named, ``none`` or ``unexplained`` (module doc), with where the residual lives when above noise.
 
     ``ref``/``ref_raw``: the model the causes were added to (nominal, or with the nuisance
     estimates); ``final``: the comparison of the model with all named causes; ``best``: the
-    evidence of round 1's best candidate (why nothing was named).
+    evidence of round 1's best candidate (why nothing was named); ``step_err``: the model's
+    own time-step error (:func:`_step_error`), reported where the residual lives.
     """
     quiet, j_noise = at_noise_level(final, inp.target)
     where = None if quiet else locate(final, inp.target, inp.sensors, inp.sleeper_x,
                                       float(ref_raw["simulation"]["x_start"]), float(ref_raw["vehicle"]["speed"]))
+    if where is not None and step_err is not None:
+        where["model_step_error"] = step_err
     if named:
         text = "; ".join(f"{c.cause}{'' if c.sleeper is None else f' at sleeper {c.sleeper}'} removes "
                          f"{100 * c.gain:.1f} % of the objective" for c in named)
@@ -371,8 +394,18 @@ def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], 
         return Answer("none", [], f"the residual is at the noise level (J {ref.cmp.objective:.4g} <= "
                                   f"{1 + NONE_MARGIN:g} x the noise's {j_noise:.4g})", None)
     return Answer("unexplained", [], f"the residual is above the noise (J {ref.cmp.objective:.4g}, noise "
-                                     f"{j_noise:.4g}) and no catalogue cause explains it: the best candidate {why}",
-                  where)
+                                     f"{j_noise:.4g}) and no catalogue cause explains it: the best candidate {why}"
+                                     + _step_words(step_err, j_noise), where)
+
+
+def _step_words(step_err: dict | None, j_noise: float) -> str:
+    """The unexplained answer's note when the model's own time-step error alone exceeds the noise objective."""
+    if step_err is None or not step_err["objective"] > j_noise:
+        return ""
+    g, v = max(step_err["groups"].items(), key=lambda kv: kv[1])
+    return (f"; the model's own time-step error alone is J {step_err['objective']:.3g} (its run at half the step "
+            f"{0.5 * step_err['step']:g} s differs most in group {g}, nRMSE {v:.3g}), above the noise: a finer "
+            f"simulation.step may resolve what no cause does at this one")
 
 
 def _legacy_named(answer: Answer, base: Evaluated, best: Evidence | None, best_label: str | None) -> CauseFit:
@@ -444,7 +477,7 @@ def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: C
 
 
 def _result(inp: _Inputs, base: Evaluated, ref: Evaluated, ref_raw: dict, named: list, rounds: list,
-            evidence: dict) -> tuple[Answer, list[CauseFit], CauseFit, Comparison]:
+            evidence: dict, step_err: dict | None = None) -> tuple[Answer, list[CauseFit], CauseFit, Comparison]:
     """Steps 4-6 as typed results: the answer, every candidate's entry, ``named_cause``, the final comparison."""
     local = [c.sleeper for c in inp.cands if c.sleeper is not None]
     reach = (min(local), max(local)) if local else (-1, -1)
@@ -452,7 +485,7 @@ def _result(inp: _Inputs, base: Evaluated, ref: Evaluated, ref_raw: dict, named:
     final = named[-1].e.cmp if named else ref.cmp
     first = rounds[0]
     best_ev = evidence.get((1, first.real[0].candidate)) if first.real else None
-    answer = _answer(inp, ref, ref_raw, named_entries, final, best_ev)
+    answer = _answer(inp, ref, ref_raw, named_entries, final, best_ev, step_err)
     causes = [_entry(e, rd, i + 1, evidence.get((i + 1, e.candidate))) for i, rd in enumerate(rounds)
               for e in rd.ranked]
     legacy = _legacy_named(answer, base, best_ev, first.real[0].candidate.label if first.real else None)
@@ -498,12 +531,13 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
     try:
         base, baseline = _baseline(pool, inp)
         ref_raw, ref, nuisance = _nuisance(pool, inp, base)
+        step_err = _step_error(pool, inp, ref_raw, ref)
         named, rounds, evidence = _rounds(pool, inp, ref_raw, ref)
         ext_raw = named[-1].raw if named else ref_raw
         ext_path = _extend(inp, ext_raw)
         validation = _validate(pool, inp, ext_raw)
         # inside the pool's lifetime: a named cause's intervals may need Jacobian runs not yet done
-        answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence)
+        answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence, step_err)
     finally:
         bar.close()
         executor.shutdown(wait=True, cancel_futures=True)

@@ -129,6 +129,12 @@ def _verdict_lines(result: Diagnosis) -> list[str]:
                       f"sleeper {w['sleeper_nearest_peak']}); channels on sleepers {w['sleepers_of_channels']}"
                       + (f"; {w['edge']}" if w.get("edge") else "") + f"; frequency band {w['band_hz'][0]:.0f}–"
                       f"{w['band_hz'][1]:.0f} Hz (peak {w['peak_hz']:.0f} Hz)."]
+        se = w.get("model_step_error")
+        if se:
+            lines += ["", f"The model's own time-step error (the reference at half its step, "
+                          f"{0.5 * se['step']:g} s, against it at {se['step']:g} s): J {se['objective']:.3g}; by group "
+                          + ", ".join(f"{g} {v:.3g}" for g, v in sorted(se['groups'].items(), key=lambda kv: -kv[1]))
+                          + ". No catalogue cause can remove it (every variant runs at the same step)."]
     return lines + [""]
 
 

@@ -71,18 +71,28 @@ errors of the floor offset each other on the bundled measurement scenario:
   model-form error may remove more (a void at 18: 29 %, named). Run at the truths'
   step (5e-5 s) the same diagnosis named the pad (gain 30 %) and fitted the void at 19
   with gain 56 %.
-* *The noise estimate of the accelerometers* reads the signal as noise: sampled at
-  2.5 kHz, the impact's ringing is not smooth at the sampling interval, and the
-  first-difference estimator gives 0.31-0.34 of the channel's spread where the record
-  holds at most 0.017 (the noise-free truth fits them to that). E's noise objective
-  dominates ``J_noise`` (0.073 of which ~0.055 is E, against a true floor of ~0.02-0.04).
-  At the coarse step this happens to be about the size of E's time-step error and
-  keeps the shares of true causes above the quarter; at the truths' step it made the
-  fitted void at 19 look like noise (``J_ref`` 0.065 <= 1.5 x 0.075: answer ``none``).
+* *The noise estimate* (:func:`orchestrator.inverse.objective.noise_sigma`, first
+  differences) is wrong both ways on these records (2.5 kHz; numbers of pad_local+mismatch
+  7101, the other case alike). On the two
+  accelerometers it reads the signal as noise: the impact's ringing is not smooth at the
+  sampling interval; applied to the *noise-free* truth it gives 0.32-0.34 of the
+  channel's spread, where the record's noise is 0.017-0.019 (the noise-free truth fits
+  them to that). On the displacements reconstructed from noisy accelerations it misses
+  the integrated, low-frequency part of the noise: 0.006-0.02 estimated, 0.03-0.16 in
+  the record. On the others the signal's own slope at 2.5 kHz is about the noise's size
+  (0.016 on the noise-free truth, 0.018-0.023 on the record, 0.015-0.019 true). Net,
+  ``J_noise`` 0.073 against a true floor of 0.038 (the truth model's J), E's estimate
+  making ~0.055 of it. At the coarse step E's over-estimate happens to be about the size
+  of E's time-step error and keeps the shares of true causes above the quarter; at the
+  truths' step it made the fitted void at 19 look like noise (``J_ref`` 0.065 <= 1.5 x
+  0.075: answer ``none``).
 
 Correcting either alone moves the answers the other way; a floor that counts both (an
 acceleration noise estimate that does not assume smoothness, and the model's step error
-measured by one run at half the step) is the principled change, not yet made.
+measured by one run at half the step) is the principled change, not yet made. What is
+made: the diagnosis measures that step error (:func:`step_error`, one run of the
+reference at half its step) and reports it where the residual lives; an ``unexplained``
+answer whose step error alone exceeds the noise objective says so.
 """
 from __future__ import annotations
 
@@ -291,6 +301,35 @@ def _pct(x: float) -> str:
     return "an undefined share" if not np.isfinite(x) else f"{100 * x:.1f} %"
 
 
+def step_error(coarse: Comparison, fine: Comparison, target) -> dict:
+    """The forward model's own time-step error on the measured base (module doc, "Known limits").
+
+    Parameters
+    ----------
+    coarse, fine : Comparison
+        The same model at the scenario's step and at half of it, against ``target``.
+    target : Target
+
+    Returns
+    -------
+    dict
+        ``channels``: id -> RMS of the two runs' difference (as it enters the residual:
+        times the channel's gain) over the channel's nRMSE normaliser; ``groups``: their
+        mean per group; ``objective``: J of them (:func:`objective_from_channels`) — what
+        the step error alone adds to J against a measurement of the finer model. A lower
+        bound of the error against the converged solution (the finer run has its own).
+    """
+    lay = target.layout
+    nrmse = {}
+    for k in coarse.channels:
+        d = target.gains.get(k, 1.0) * (coarse.simulated[k] - fine.simulated[k])
+        ok = np.isfinite(d)
+        sc = target.scale[k] if target.scale is not None else float(np.nanstd(target.measured.channels[k]))
+        nrmse[k] = float(np.sqrt(np.mean(d[ok] ** 2))) / sc if ok.any() and sc > 0 else 0.0
+    j, groups = objective_from_channels(nrmse, lay.groups, lay.weights)
+    return {"objective": j, "groups": groups, "channels": nrmse}
+
+
 def at_noise_level(ref: Comparison, target) -> tuple[bool, float]:
     """(the reference's residual is at the noise level, J_noise) (module doc)."""
     j_noise = noise_objective(target, ref)
@@ -395,4 +434,4 @@ def _edge(cmp: Comparison, target, sensors) -> str | None:
 
 __all__ = ["autocorrelation", "integrated_time", "effective_size", "channel_neff", "noise_objective", "deviance",
            "bic_eff", "chi2_eff", "held_out_groups", "Evidence", "assess", "at_noise_level", "DELTA_BIC",
-           "MIN_SHARE", "CV_TOL", "NONE_MARGIN", "WINDOW_SHARE", "locate"]
+           "MIN_SHARE", "CV_TOL", "NONE_MARGIN", "WINDOW_SHARE", "locate", "step_error"]
