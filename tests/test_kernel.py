@@ -152,3 +152,55 @@ def test_kernel_wheel_lookup_matches_model_points():
             checked += 1
     assert checked > 1000
     assert par[P_CH] == 0.0   # the tables write only the geometry's parameters
+
+
+def test_influence_rows_are_solved_once_per_node():
+    """A wheel entering the next beam element solves only the rows of the node it has not met
+    (2 of 4: neighbouring elements share a node), and the rows are ``A^{-1} r`` to round-off
+    against SuperLU's own solve of the same unpruned matrix (an independent factorization;
+    1e-10 of the largest entry: cond(A) ~ 1e3 times round-off, as in
+    test_ldl_solve_is_exact_to_round_off)."""
+    import scipy.sparse.linalg as spla
+
+    from track.cosim import TrackCosim
+
+    sc = load_scenario(DEFAULT_SCENARIO)
+    tc = TrackCosim(sc.track, 1, 1e5, sc.simulation.step, speed=30.0, kernel=True)
+    x0 = tc.model.layout.sleepers[5].x
+    tc.do_step(np.array([x0]), np.zeros(1), np.zeros(1))
+    cc, model = tc._compiled, tc.model
+    body = model.body(model.layout.running_body("left", x0))
+    e = int(body.point_row(x0 - body.origin)[0]) + 3          # elements no wheel has entered yet
+    counters = tc.integ.counters
+    solves = counters.solves
+    first = cc.influence_rows(body, e)
+    assert counters.solves - solves == 4
+    second = cc.influence_rows(body, e + 1)
+    assert counters.solves - solves == 6                       # the shared node's two rows come from the cache
+    for rows, el in ((first, e), (second, e + 1)):
+        E = np.zeros((model.n, 4))
+        E[body.gdofs, :] = body.load_rows(el).T
+        ref = spla.spsolve(tc.integ.step_matrix.tocsc(), E).T
+        assert np.abs(rows - ref).max() <= 1e-10 * np.abs(ref).max()
+    assert np.array_equal(first[2:], second[:2])               # the shared node: the very same rows
+
+
+def test_fill_ordering_depends_on_the_pattern_only():
+    """The LDL^T ordering cached per sparsity pattern (track.kernel.fill_ordering) is the one a new
+    minimum-degree LU of a matrix with the same pattern and other values gives (computed here
+    with SuperLU directly); a matrix of another pattern gets its own."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from track.kernel import fill_ordering
+
+    sc = load_scenario(DEFAULT_SCENARIO)
+    model = build_track(sc.track)
+    A = TrackIntegrator(model, sc.simulation.step, np.zeros(model.n)).step_matrix.tocsc()
+    fill_ordering(A)                                           # now cached
+    B = A.copy()
+    B.data = B.data * np.random.default_rng(3).uniform(0.5, 2.0, B.data.size)
+    B = (B + B.T).tocsc()                                      # same pattern (A is symmetric), other values
+    assert np.array_equal(fill_ordering(B), np.argsort(spla.splu(B, permc_spec="MMD_AT_PLUS_A").perm_c))
+    C = (A + sp.eye(A.shape[0], k=40) + sp.eye(A.shape[0], k=-40)).tocsc()   # another pattern
+    assert np.array_equal(fill_ordering(C), np.argsort(spla.splu(C, permc_spec="MMD_AT_PLUS_A").perm_c))

@@ -1097,7 +1097,8 @@ class CompiledContacts:
         element's rows are those of its two nodes' dofs, the solid's of its two path nodes),
         so a wheel running along a body solves each row once, not twice. Every column of
         :func:`ldl_solve_many` takes the same operations whatever the others, so a row is the
-        same to the bit however it was grouped.
+        same, to the last digit, however it was grouped (the sensor signals of the default, the
+        measurement and the profile scenarios came out identical to per-element rows).
         """
         ids = [2 * e + j for j in range(4)] if not body.solid else [e, e + 1]   # rows of T / path nodes
         cache = self._sh.ldl_influence
