@@ -71,7 +71,7 @@ errors of the floor offset each other on the bundled measurement scenario:
   model-form error may remove more (a void at 18: 29 %, named). Run at the truths'
   step (5e-5 s) the same diagnosis named the pad (gain 30 %) and fitted the void at 19
   with gain 56 %; at half the scenario's step (1e-4 s) it named both right (shares 30 %
-  and 45 %, total gains 34 % and 54 %), and three nulls stayed ``none`` (wall ~1.5x).
+  and 45 %, total gains 34 % and 54 %), and three nulls stayed ``none`` (wall 1.1-1.8x).
 * *The noise estimate* (:func:`orchestrator.inverse.objective.noise_sigma`, first
   differences) is wrong both ways on these records (2.5 kHz; numbers of pad_local+mismatch
   7101, the other case alike). On the two
