@@ -63,10 +63,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from orchestrator.inputs.sensor_layout import layout_of
-from orchestrator.inverse.fieldlike import Chain, FieldCase, disturbance
+from orchestrator.inverse.fieldlike import Chain, FieldCase, disturbance, gain_and_reconstruct
 from orchestrator.inverse.synthetic import (acquisition_rate, acquisition_times, sample_signals, truth_run,
                                             variant_scenario)
-from track.sensors import displacement_from_acceleration
 
 
 @dataclass(frozen=True)
@@ -172,11 +171,8 @@ def noise_free(sampled: dict, types: dict, dt: float, highpass: float, chain: Ch
     chain : Chain or None
         Its gain error (if any) is applied.
     """
-    out = {}
-    for sid, x in sampled.items():
-        y = chain.gain * x if chain is not None and sid == chain.gain_channel else np.asarray(x, float)
-        out[sid] = displacement_from_acceleration(y, dt, highpass) if types[sid] == "displacement" else y
-    return out
+    return {sid: gain_and_reconstruct(sid, np.asarray(x, float), types, dt, highpass, chain)
+            for sid, x in sampled.items()}
 
 
 def chain_noise(sampled: dict, types: dict, dt: float, highpass: float, chain: Chain) -> dict:
@@ -187,13 +183,9 @@ def chain_noise(sampled: dict, types: dict, dt: float, highpass: float, chain: C
     reconstructed for displacement channels — the same as ``apply_chain(sampled)`` minus
     ``apply_chain`` of a chain without noise and drift (tests/test_detectability.py checks it).
     """
-    out = {}
-    for index, (sid, x) in enumerate(sampled.items()):
-        n = disturbance(chain, index, len(x), dt, float(np.std(x)))
-        if sid == chain.gain_channel:
-            n = chain.gain * n
-        out[sid] = displacement_from_acceleration(n, dt, highpass) if types[sid] == "displacement" else n
-    return out
+    return {sid: gain_and_reconstruct(sid, disturbance(chain, index, len(x), dt, float(np.std(x))), types, dt,
+                                      highpass, chain)
+            for index, (sid, x) in enumerate(sampled.items())}
 
 
 def nuisance_free(d: np.ndarray, without: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -252,13 +252,20 @@ def apply_chain(sampled: dict, types: dict, dt: float, highpass: float, chain: C
     out = {}
     for index, (sid, x) in enumerate(sampled.items()):
         scale = float(np.std(x))
-        y = x + disturbance(chain, index, len(x), dt, scale)
-        if sid == chain.gain_channel:
-            y = chain.gain * y + (0.0 if types[sid] == "displacement" else chain.offset * scale)
-        if types[sid] == "displacement":
-            y = displacement_from_acceleration(y, dt, highpass)
+        y = gain_and_reconstruct(sid, x + disturbance(chain, index, len(x), dt, scale), types, dt, highpass, chain)
+        if sid == chain.gain_channel and types[sid] != "displacement":
+            y = y + chain.offset * scale
         out[sid] = y
     return out
+
+
+def gain_and_reconstruct(sid: str, y: np.ndarray, types: dict, dt: float, highpass: float,
+                         chain: Chain | None) -> np.ndarray:
+    """Channel ``sid``'s signal ``y`` past the chain's amplifier and reconstruction: times the gain
+    error on the faulty channel, a displacement rebuilt from its accelerometer's signal."""
+    if chain is not None and sid == chain.gain_channel:
+        y = chain.gain * y
+    return displacement_from_acceleration(y, dt, highpass) if types[sid] == "displacement" else y
 
 
 # ------------------------------------------------------------------------------------------ drawing effects
@@ -478,4 +485,4 @@ def synthesize_case(scenario, case: FieldCase, out_file, crop: float = 0.01) -> 
 
 __all__ = ["FieldCase", "Mismatch", "Chain", "Family", "FAMILIES", "SLOW_FAMILIES", "EFFECT_DRAWS", "draw_case",
            "draw_mismatch", "draw_chain", "draw_void_gaps", "wedge_residual", "ar1", "disturbance", "apply_chain",
-           "instrumented_sleepers", "synthesize_case", "GRID_CLEARANCE", "WEDGE_RESIDUAL_MIN", "DRIFT_HZ"]
+           "instrumented_sleepers", "synthesize_case", "gain_and_reconstruct", "GRID_CLEARANCE", "WEDGE_RESIDUAL_MIN", "DRIFT_HZ"]
