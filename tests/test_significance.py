@@ -37,3 +37,55 @@ def test_step_error_is_the_nrmse_of_the_two_runs_difference_in_closed_form():
     assert out["channels"]["p2"] == 0.0
     assert abs(out["groups"]["P"] - p) < 1e-12 and abs(out["groups"]["Q"] - q) < 1e-12
     assert abs(out["objective"] - (p + 3.0 * q) / 4.0) < 1e-12
+
+
+def _residual_target(residuals: dict, types: dict):
+    cmp = Comparison(0.0, {k: {"nrmse": 0.0} for k in residuals}, {}, 0.0, 0.0, 0, residuals, {})
+    return cmp, SimpleNamespace(layout=SimpleNamespace(types=types))
+
+
+def test_a_channel_is_loud_only_when_its_residual_stands_above_its_own_first_difference_noise_level():
+    """:func:`loud_channels` against closed forms. White noise: the first-difference level is the noise's
+    sigma, ratio ~1. AR(1) noise of lag-1 correlation rho: its differences have variance 2 (1 - rho) sigma^2,
+    so the level reads sigma sqrt(1 - rho) and the ratio is 1 / sqrt(1 - rho): 2.24 at rho 0.8, below
+    LOUD_FACTOR 3 (quiet), 4.47 at rho 0.95 (loud). A smooth bump of amplitude 10 sigma on white noise: its
+    differences are ~0 at the sampling interval, the level stays sigma, the RMS is ~sqrt(10^2 * 3/8 + 1) sigma
+    (the mean square of a Hann bump of peak A over its support is 3 A^2 / 8) -> loud. A reconstructed
+    displacement is never judged, however loud. Tolerance: 4000 samples, the MAD-based level has a relative
+    sampling error ~2 %, far inside the margins checked (2.24 vs 3, 4.47 vs 3)."""
+    from scipy.signal import lfilter
+
+    from orchestrator.inverse.significance import LOUD_FACTOR, loud_channels
+
+    rng = np.random.default_rng(11)
+    n = 4000
+
+    def ar(rho):
+        return lfilter([1.0], [1.0, -rho], rng.normal(0.0, np.sqrt(1 - rho ** 2), n))
+
+    bump = 10.0 * np.hanning(n) + rng.normal(0.0, 1.0, n)
+    res = {"white": rng.normal(0.0, 1.0, n), "ar08": ar(0.8), "ar095": ar(0.95), "bump": bump,
+           "disp": 50.0 * np.hanning(n)}
+    types = {"white": "pressure", "ar08": "strain", "ar095": "acceleration", "bump": "pressure",
+             "disp": "displacement"}
+    loud = loud_channels(*_residual_target(res, types))
+    assert set(loud) == {"ar095", "bump"}, loud
+    assert abs(loud["ar095"] - 1.0 / np.sqrt(0.05)) < 0.15 * 4.47          # sampling error of rho-0.95 AR(1)
+    assert abs(loud["bump"] - np.sqrt(100 * 3 / 8 + 1)) < 0.05 * 6.2
+    assert LOUD_FACTOR > 1.0 / np.sqrt(1 - 0.8)                            # AR(1) 0.8 is taken as noise
+
+
+def test_at_noise_level_says_no_when_one_channel_is_loud_though_the_objective_is_at_the_floor():
+    """J_ref below (1 + NONE_MARGIN) J_noise alone no longer makes ``none``: a loud channel vetoes it."""
+    from orchestrator.inverse.significance import at_noise_level
+
+    rng = np.random.default_rng(12)
+    n = 2000
+    quiet = {"a": rng.normal(0.0, 1.0, n), "b": rng.normal(0.0, 1.0, n)}
+    loud = {"a": quiet["a"], "b": 8.0 * np.hanning(n) + rng.normal(0.0, 1.0, n)}
+    layout = SimpleNamespace(groups={"a": "A", "b": "A"}, weights={"A": 1.0}, types={"a": "pressure", "b": "pressure"})
+    for res, want in ((quiet, True), (loud, False)):
+        cmp = Comparison(0.0, {k: {"nrmse": 0.01} for k in res}, {"A": 0.01}, 0.01, 0.0, 0, res, {})
+        target = SimpleNamespace(layout=layout, measured=None, scale={"a": 1.0, "b": 1.0}, sigma={"a": 1.0, "b": 1.0})
+        ok, j_noise, found = at_noise_level(cmp, target)
+        assert j_noise == 1.0 and ok is want and (set(found) == set() if want else set(found) == {"b"})

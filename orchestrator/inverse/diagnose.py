@@ -88,8 +88,8 @@ from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
 from orchestrator.inverse.selection import CONFIRM, FIT, Round, select, superposed_ranking
-from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, MIN_SHARE, NONE_MARGIN, Evidence, assess,
-                                               at_noise_level, locate, step_error)
+from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, LOUD_FACTOR, MIN_SHARE, NONE_MARGIN, Evidence,
+                                               assess, at_noise_level, locate, step_error)
 
 SENSOR_REACH = 1     # local causes on the sleepers carrying sensors +- this many (an effect just beyond them)
 MAX_CAUSES = 2       # causes named at most (forward selection)
@@ -379,7 +379,7 @@ def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], 
     evidence of round 1's best candidate (why nothing was named); ``step_err``: the model's
     own time-step error (:func:`_step_error`), reported where the residual lives.
     """
-    quiet, j_noise = at_noise_level(final, inp.target)
+    quiet, j_noise, _ = at_noise_level(final, inp.target)
     where = None if quiet else locate(final, inp.target, inp.sensors, inp.sleeper_x,
                                       float(ref_raw["simulation"]["x_start"]), float(ref_raw["vehicle"]["speed"]))
     if where is not None and step_err is not None:
@@ -390,12 +390,22 @@ def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], 
         rest = "the rest is at the noise level" if quiet else "a residual above the noise remains (see where)"
         return Answer("named", named, f"{text}; {rest}.", where)
     why = "; ".join(best.reasons) if best is not None else "no candidate could be evaluated"
-    if at_noise_level(ref.cmp, inp.target)[0]:
+    ref_quiet, _, loud = at_noise_level(ref.cmp, inp.target)
+    if ref_quiet:
         return Answer("none", [], f"the residual is at the noise level (J {ref.cmp.objective:.4g} <= "
-                                  f"{1 + NONE_MARGIN:g} x the noise's {j_noise:.4g})", None)
+                                  f"{1 + NONE_MARGIN:g} x the noise's {j_noise:.4g}, no channel above "
+                                  f"{LOUD_FACTOR:g} x its own noise level)", None)
     return Answer("unexplained", [], f"the residual is above the noise (J {ref.cmp.objective:.4g}, noise "
-                                     f"{j_noise:.4g}) and no catalogue cause explains it: the best candidate {why}"
-                                     + _step_words(step_err, j_noise), where)
+                                     f"{j_noise:.4g}{_loud_words(loud)}) and no catalogue cause explains it: the "
+                                     f"best candidate {why}" + _step_words(step_err, j_noise), where)
+
+
+def _loud_words(loud: dict) -> str:
+    """The unexplained answer's note on the channels whose residual stands above their own noise level."""
+    if not loud:
+        return ""
+    top = list(loud.items())[:3]
+    return "; channel(s) " + ", ".join(f"{k} at {v:.3g} x" for k, v in top) + " their own noise level"
 
 
 def _step_words(step_err: dict | None, j_noise: float) -> str:
@@ -461,7 +471,7 @@ def _total_gain(before: Comparison, after: Comparison) -> Gain:
 def _settings(cands: list[Candidate]) -> dict:
     """The thresholds of the diagnosis and the candidates' labels (``diagnosis.json`` ``settings``)."""
     return {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL, "none_margin": NONE_MARGIN,
-            "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH, "max_causes": MAX_CAUSES,
+            "loud_factor": LOUD_FACTOR, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH, "max_causes": MAX_CAUSES,
             "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM, "candidates": [c.label for c in cands]}
 
 
