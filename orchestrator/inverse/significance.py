@@ -108,12 +108,29 @@ errors of the floor offset each other on the bundled measurement scenario:
   truths' step it made the fitted void at 19 look like noise (``J_ref`` 0.065 <= 1.5 x
   0.075: answer ``none``).
 
-Correcting either alone moves the answers the other way; a floor that counts both (an
-acceleration noise estimate that does not assume smoothness, and the model's step error
-measured by one run at half the step) is the principled change, not yet made. What is
-made: the diagnosis measures that step error (:func:`step_error`, one run of the
-reference at half its step) and reports it where the residual lives; an ``unexplained``
-answer whose step error alone exceeds the noise objective says so.
+Correcting either alone moves the answers the other way. A floor that counts both was
+tried on paper (2026-11-25, ``benchmarks/bench_noise_floor.py`` on the 51 field-like
+cases, ``benchmarks/RESULTS.md``): the first differences of the *residual* instead of the
+record read the accelerometers' noise right (median 1.17 of the truth; the record's read
+16.7), and pressures and strains alike (0.86-0.89), but the reconstructed displacements'
+noise at 0.05 of its size: that noise is the double integral of the accelerometers'
+coloured noise, concentrated near the reconstruction's 5 Hz corner, a few cycles over a
+70 ms record — smooth at the sampling interval, so no difference-based estimator sees it,
+and scaling one by the reconstruction filter's own ratio (std / first-difference level
+of reconstructed white noise: 52, 10-90 % 33-70 over single 350-sample records) is
+neither precise nor safe (a channel that carries an effect would pass for noise). With
+the accelerometers' level from the residual and the others' as now, J_noise is 0.32-2.1 x
+the true floor (the nulls: 0.44-0.96 x, six of nine below 1 / 1.5, so they would read
+``unexplained`` on pure noise). So J_noise stays as it is (its
+two errors offset), and what was made instead is the per-channel veto of ``none``
+(:func:`loud_channels`, module doc above), which judges only the channels whose noise the
+residual's differences do see. A noise level for the displacements needs data the
+record does not hold: a quiet lead-in before the wheel arrives (field loggers record
+one; the field-like records start with the wheel already over the sensors), or repeated
+passes. What is also made: the diagnosis measures the model's step error
+(:func:`step_error`, one run of the reference at half its step) and reports it where the
+residual lives; an ``unexplained`` answer whose step error alone exceeds the noise
+objective says so.
 """
 from __future__ import annotations
 
