@@ -89,3 +89,29 @@ def test_at_noise_level_says_no_when_one_channel_is_loud_though_the_objective_is
         target = SimpleNamespace(layout=layout, measured=None, scale={"a": 1.0, "b": 1.0}, sigma={"a": 1.0, "b": 1.0})
         ok, j_noise, found = at_noise_level(cmp, target)
         assert j_noise == 1.0 and ok is want and (set(found) == set() if want else set(found) == {"b"})
+
+
+def test_an_unexplained_answer_locates_the_residual_when_the_scenario_leaves_x_start_to_the_job():
+    """Regression (session 9): with ``simulation.x_start: null`` (the default scenario's) an answer above
+    the noise crashed in ``_answer`` (``float(None)``): the wheel's start is now the job's
+    (:func:`orchestrator.cosim.passage.start_position`, read once with the inputs). A residual loud on one
+    channel of sleeper 2 (a Hann bump, peak at the record's middle) must be located there: the wheel at
+    x_start + V (t_peak - shift) = 1.0 + 2.0 x 0.5 = 2.0 m, the sleeper nearest it index 2 (sleepers at
+    0, 1, ..., 4 m)."""
+    from orchestrator.inverse.diagnose import _answer
+
+    rng = np.random.default_rng(13)
+    n, dt = 1001, 1e-3
+    t = np.arange(n) * dt
+    res = {"a": rng.normal(0.0, 1.0, n), "b": 20.0 * np.hanning(n) + rng.normal(0.0, 1.0, n)}
+    cmp = Comparison(0.0, {k: {"nrmse": float(np.sqrt(np.mean(r ** 2)))} for k, r in res.items()}, {"A": 1.0},
+                     1.0, 0.0, 2 * n, res, {})
+    layout = SimpleNamespace(groups={"a": "A", "b": "A"}, weights={"A": 1.0}, types={"a": "pressure", "b": "pressure"})
+    target = SimpleNamespace(layout=layout, scale={"a": 1.0, "b": 1.0}, sigma={"a": 1.0, "b": 1.0},
+                             measured=SimpleNamespace(t=t, dt=dt))
+    sensors = [SimpleNamespace(id="a", body="sleeper_1"), SimpleNamespace(id="b", body="sleeper_2")]
+    inp = SimpleNamespace(target=target, sensors=sensors, sleeper_x=np.arange(5.0), x_start=1.0)
+    ref_raw = {"simulation": {"x_start": None}, "vehicle": {"speed": 2.0}}
+    answer = _answer(inp, SimpleNamespace(cmp=cmp), ref_raw, [], cmp, None)
+    assert answer.kind == "unexplained" and "b at" in answer.reason, answer.reason
+    assert answer.where["sleeper_nearest_peak"] == 2 and answer.where["channels"][0]["id"] == "b", answer.where

@@ -158,6 +158,9 @@ class _Inputs:
         The catalogue's candidates at the sensors (and :data:`SENSOR_REACH` beyond).
     sleeper_x : ndarray
         Track coordinate of every sleeper [m], by index (where an unexplained residual lives).
+    x_start : float
+        The front wheelset's position at t = 0 [m]: ``simulation.x_start`` or the job's choice
+        when it is null (:func:`orchestrator.cosim.passage.start_position`).
     """
 
     scenario_path: object
@@ -170,6 +173,7 @@ class _Inputs:
     validations: list
     cands: list
     sleeper_x: np.ndarray
+    x_start: float
 
     @property
     def raw0(self) -> dict:
@@ -183,6 +187,7 @@ def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
     Input: :func:`diagnose`'s paths and ``--validate`` texts. Output: the :class:`_Inputs`
     (``out_dir`` is created). Raises :class:`UserInputError` on bad input.
     """
+    from orchestrator.cosim.passage import start_position
     from orchestrator.inputs.scenario import load_scenario
     from orchestrator.inputs.sensor_layout import layout_of, resolve
     from orchestrator.inputs.track_model import track_model
@@ -203,8 +208,9 @@ def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
     val_targets = [(Target.read(p, layout), p, v) for p, v in validations]
     cands = candidates(_sensor_sleepers(sensors), len(model.layout.sleepers), SENSOR_REACH)
     sleeper_x = np.array([s.x for s in model.layout.sleepers], float)
+    x_start = start_position(scenario, model.layout)
     return _Inputs(scenario_path, measured_path, out_dir, scenario, layout, sensors, target, val_targets, cands,
-                   sleeper_x)
+                   sleeper_x, x_start)
 
 
 def _baseline(pool: Pool, inp: _Inputs) -> tuple[Evaluated, Baseline]:
@@ -381,7 +387,7 @@ def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], 
     """
     quiet, j_noise, _ = at_noise_level(final, inp.target)
     where = None if quiet else locate(final, inp.target, inp.sensors, inp.sleeper_x,
-                                      float(ref_raw["simulation"]["x_start"]), float(ref_raw["vehicle"]["speed"]))
+                                      inp.x_start, float(ref_raw["vehicle"]["speed"]))
     if where is not None and step_err is not None:
         where["model_step_error"] = step_err
     if named:
