@@ -374,6 +374,19 @@ def _mutate(data: dict, draw) -> str:
     return f"{kind} at {path}"
 
 
+@pytest.mark.parametrize("sep", ["\x1e", "\u2028", "\x0b", "\x85"])
+def test_a_file_name_holding_a_line_separator_is_still_a_one_line_error(tmp_path, sep):
+    """Found by the property test below (session 9: ``sensors: "0\\x1e"``): the message quotes the path it
+    looked for, and ``str.splitlines`` also breaks at the record separator, vertical tab, NEL and the
+    Unicode line separator, not only at CR / LF. Each must be folded, the key still named."""
+    scenario = copy.deepcopy(BASE)
+    scenario["sensors"] = f"0{sep}"
+    path = tmp_path / "mutated.yaml"
+    path.write_text(dump_yaml(scenario), encoding="utf-8")
+    rc, _, err = cli(["run", path, "--dry-run"])
+    assert_one_line_exit_2(rc, err, "sensors", "file not found")
+
+
 def test_property_mutated_scenarios_are_valid_or_one_line_exit_2(tmp_path):
     """>= 200 random mutations, each validated as `turnout run --dry-run` does: exit 0 or a one-line exit 2.
 

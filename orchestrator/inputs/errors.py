@@ -13,9 +13,17 @@ from typing import Iterable
 __all__ = ["UserInputError", "UserInputWarning", "ScenarioError", "one_line", "did_you_mean"]
 
 
+LINE_BREAKS = "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"   # every boundary of str.splitlines
+
+
 def one_line(text: object) -> str:
-    """``str(text)`` with every line break (and the blanks around it) folded into one space."""
-    return re.sub(r"\s*[\r\n]+\s*", " ", str(text)).strip()
+    """``str(text)`` with every line break (and the blanks around it) folded into one space.
+
+    A line break is any boundary of ``str.splitlines``, not only CR and LF: a scenario value
+    may hold a record separator (\\x1e) or a Unicode line separator, which an error
+    message quoting a path built from it would otherwise split.
+    """
+    return re.sub(rf"\s*[{LINE_BREAKS}]+\s*", " ", str(text)).strip()
 
 
 def did_you_mean(word: object, choices: Iterable[str]) -> str:
