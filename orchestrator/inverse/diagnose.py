@@ -477,8 +477,9 @@ def _total_gain(before: Comparison, after: Comparison) -> Gain:
 def _settings(cands: list[Candidate]) -> dict:
     """The thresholds of the diagnosis and the candidates' labels (``diagnosis.json`` ``settings``)."""
     return {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL, "none_margin": NONE_MARGIN,
-            "loud_factor": LOUD_FACTOR, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH, "max_causes": MAX_CAUSES,
-            "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM, "candidates": [c.label for c in cands]}
+            "loud_factor": LOUD_FACTOR, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH,
+            "max_causes": MAX_CAUSES, "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM,
+            "candidates": [c.label for c in cands]}
 
 
 def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: Comparison) -> None:
