@@ -56,7 +56,8 @@ is at the noise level when both hold:
   effect that a few quiet channels see clearly hardly moves it: measured on issue 14's
   field-like cases (``benchmarks/bench_noise_floor.py``), voids that the diagnosis
   answered ``none`` left one pressure cell (A6, the far end of the transition sleeper) at
-  4.6-31 times the chain's noise, while J_ref stayed below 1.5 J_noise. Why the residual's
+  4.6-31 times the residual's own first-difference level (3.4-42 times the chain's true
+  noise), while J_ref stayed below 1.5 J_noise. Why the residual's
   differences and not the record's: they do not read the signal's own roughness (the
   nose accelerometers' ringing, which the record's differences take for noise 7-24
   times over) — the reference model carries that signal. Why a factor 3: the
@@ -378,8 +379,9 @@ def loud_channels(cmp: Comparison, target) -> dict:
         r = r[np.isfinite(r)]
         level = noise_sigma(r)
         rms = float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
-        if rms > LOUD_FACTOR * level if level > 0 else rms > 0:
-            out[k] = rms / level if level > 0 else float("inf")
+        ratio = rms / level if level > 0 else (float("inf") if rms > 0 else 0.0)   # no level (NaN, 0): any misfit
+        if ratio > LOUD_FACTOR:
+            out[k] = ratio
     return dict(sorted(out.items(), key=lambda kv: -kv[1]))
 
 
