@@ -453,3 +453,37 @@ def test_dense_search_skips_samples_outside_the_simulated_window():
             v[:25] = np.nan   # the first 5 ms of the record: before the simulated window
     x, cmp = dense_search(target, SimpleNamespace(log=False), np.array([1.0, 2.0, 3.0]), sig)
     assert x == pytest.approx(2.0, abs=0.02) and np.isfinite(cmp.objective)
+
+
+def test_a_site_the_ranking_prefers_but_the_share_rejects_joins_the_named_causes_ambiguity_set():
+    """The ranking (BIC on N_eff) and the share can disagree (diagnose module doc, step 4; measured in
+    void_sensor+mismatch 7101: the true void at 19 ranked first but removed 23 % of the explainable misfit,
+    the void at 18, ranked below it, 29 % and was named). Built by hand, no runs: three fitted candidates
+    ranked void@19, pad@20, void@18; void@19 fails only the share, pad@20 fails the share and the
+    significance, void@18 passes. The named cause is void@18 and its ambiguity set holds 19 (same cause,
+    ranked above, failed only the share) but not the pad (another cause); a candidate that failed more than
+    the share (here: as void@19 with a held-out group too) would not join."""
+    from types import SimpleNamespace
+
+    from orchestrator.inputs.causes import Candidate
+    from orchestrator.inverse.diagnose import _named_entry, _Named, _preferred
+    from orchestrator.inverse.screening import Evaluated
+    from orchestrator.inverse.significance import Evidence
+
+    def ev(failed):
+        return Evidence(0.1, 0.2, 1.0, 0.5, 20.0, 1.0, 100, 50.0, {}, [f"fails {f}" for f in failed], list(failed))
+
+    cmp = SimpleNamespace(objective=0.9, chi2=1.0, n=100)
+    v19, p20, v18 = (Evaluated(Candidate(c, s), np.zeros(6 if c == "ballast_void" else 1), cmp, 1, "fitted")
+                     for c, s in (("ballast_void", 19), ("rail_pad_stiffness", 20), ("ballast_void", 18)))
+    for failed_19, joins in ((["share"], True), (["share", "held_out"], False)):
+        tried = {v19.candidate: ev(failed_19), p20.candidate: ev(["significance", "share"]), v18.candidate: ev([])}
+        rd = SimpleNamespace(real=[v19, p20, v18], twins={}, fitters={}, bic={v19.candidate: 0.0,
+                             p20.candidate: 30.0, v18.candidate: 75.0}, reference=SimpleNamespace(cmp=cmp))
+        pick = next(e for e in rd.real if tried[e.candidate].passes)   # what _pick does with these evidences
+        assert pick is v18
+        entry = _named_entry(_Named(pick, tried[v18.candidate], rd, {}, _preferred(rd, pick, tried)), 1, (18, 24))
+        assert entry.sleeper == 18
+        assert (19 in entry.ambiguity["sleepers"]) is joins, entry.ambiguity
+        assert 20 not in entry.ambiguity["sleepers"], entry.ambiguity
+        assert ("ranked_above" in entry.ambiguity) is joins

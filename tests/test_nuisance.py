@@ -182,3 +182,45 @@ def test_a_track_effect_is_not_absorbed(sc, pool, tmp_path, name, effect):
     assert fit.cmp.objective >= 0.97 * base.objective        # at most 3 % of the misfit absorbed
     assert fit.channel_gains == {}
     assert fit.values["speed"] == pytest.approx(sc.vehicle.speed, rel=SPEED_RTOL)
+
+
+def test_a_gain_must_explain_its_channel_and_reconstructed_displacements_do_not_veto_it():
+    """The gain rule's two field-like parts (nuisance module doc, stage 2), on hand-built signals (no runs).
+
+    Four pressure channels P1..P4 and three displacements D1..D3 on neighbouring sleepers; each
+    simulated signal a smooth pulse train, each measured one the simulated plus 1 % white noise.
+    (1) P2 recorded 13 % high, D1 9 % high (the scatter of a displacement reconstructed from noisy
+    accelerations, measured 5-12 %): P2's gain is found within 0.015 — D1, a neighbour beyond
+    NEIGHBOUR_DEV, does not veto it. (2) P3's pulses grow by up to 40 % towards the record's end (a
+    change of shape, as a void far along the sleeper makes at its far-end cell): its least-squares ln g
+    is an outlier like a gain fault's, but with that gain its residual stays far above its noise level:
+    no gain. Closed form of (2): the residual after the best gain is the part of the ramp orthogonal to
+    the signal, ~0.1 of the signal's RMS against 0.01 noise, so its loudness is ~10 > LOUD_FACTOR."""
+    from types import SimpleNamespace
+
+    from orchestrator.inverse.nuisance import GAIN_MIN, NEIGHBOUR_DEV, sensor_gains
+    from orchestrator.inverse.significance import LOUD_FACTOR, loudness
+
+    rng = np.random.default_rng(11)
+    n = 2000
+    t = np.linspace(0.0, 1.0, n)
+    ids = ["P1", "P2", "P3", "P4", "D1", "D2", "D3"]
+    sim = {k: np.sin(2 * np.pi * (5 + i) * t) ** 2 for i, k in enumerate(ids)}
+    types = {k: "pressure" if k[0] == "P" else "displacement" for k in ids}
+    layout = SimpleNamespace(groups={k: k[0] for k in ids}, types=types)
+    neighbours = {k: set(ids) - {k} for k in ids}
+
+    def gains_of(scale):
+        meas = {k: scale.get(k, 1.0) * sim[k] + rng.normal(0, 0.01 * np.std(sim[k]), n) for k in ids}
+        target = SimpleNamespace(layout=layout, measured=SimpleNamespace(channels=meas))
+        return sensor_gains(target, SimpleNamespace(simulated=sim), neighbours), meas
+
+    (gains, lg), _ = gains_of({"P2": 1.13, "D1": 1.09})
+    assert abs(lg["D1"]) > NEIGHBOUR_DEV            # the old rule's veto would have fired
+    assert set(gains) == {"P2"} and gains["P2"] == pytest.approx(1.13, abs=0.015), gains
+
+    ramp = 1.0 + 0.4 * t ** 2
+    (gains, lg), meas = gains_of({"P3": ramp})
+    assert abs(lg["P3"]) > GAIN_MIN and abs(lg["P3"] - np.median([lg[k] for k in ("P1", "P2", "P4")])) > 0.1
+    assert loudness(meas["P3"] - np.exp(lg["P3"]) * sim["P3"]) > LOUD_FACTOR
+    assert gains == {}, gains

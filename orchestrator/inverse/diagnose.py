@@ -30,7 +30,13 @@ module that applies it):
    removed 62 % of J and the better-ranked pad 15 %; wrong in void_sensor+mismatch 7101,
    where the true void at 19 removed 23 % of the explainable misfit and a void at 18,
    ranked ΔBIC 75 below it, 29 %: the floor of :mod:`orchestrator.inverse.significance`,
-   "Known limits").
+   "Known limits"). Where the two criteria disagree between sites of the *same* cause,
+   neither is trusted over the other: the candidates of the named one's cause that rank
+   above it and fail only the share join its ambiguity set (:func:`_preferred`;
+   ``ambiguity.ranked_above`` says which), so the answer is "a void at 18 or 19", not a
+   confident wrong sleeper. A better-ranked candidate of *another* cause does not: a
+   cause that removes a quarter of the explainable misfit is not set aside for one that
+   does not.
 5. **Round 2, forward selection** (:func:`_second_round`): with a cause named, the
    :data:`SECOND_ROUND` candidates whose round-1 screening signals, added as a change to
    the extended model's, fit best (no runs) are screened for real on top of the
@@ -75,7 +81,7 @@ import copy
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -291,12 +297,28 @@ def _same_site(a: Candidate, b: Candidate) -> bool:
 
 @dataclass
 class _Named:
-    """A named cause: its evaluation, evidence, round, and the reference scenario with it added."""
+    """A named cause: its evaluation, evidence, round, and the reference scenario with it added.
+
+    ``preferred``: the candidates of the same cause that rank above it and fail only the
+    share (:func:`_preferred`).
+    """
 
     e: Evaluated
     evidence: Evidence
     round: Round
     raw: dict
+    preferred: list = field(default_factory=list)
+
+
+def _preferred(rd: Round, pick: Evaluated, tried: dict) -> list[Candidate]:
+    """Step 4: the candidates of the named one's cause that rank above it (BIC on N_eff) and fail only the share.
+
+    The ranking and the share disagree about them (module doc, 4.): the data prefer them
+    statistically, the share the named one. The named cause's ambiguity set holds them
+    too (:func:`_named_entry`), so a site the ranking prefers is never dropped silently.
+    """
+    above = rd.real[:rd.real.index(pick)]
+    return [o.candidate for o in above if o.candidate.cause == pick.candidate.cause and tried[o.candidate].short_only]
 
 
 def _rounds(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated) -> tuple[list[_Named], list[Round], dict]:
@@ -316,7 +338,7 @@ def _rounds(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated) -> tuple[list[_
             break
         c = pick.candidate
         raw = kind_of(c).apply(raw, c.sleeper, pick.values)
-        named.append(_Named(pick, ev, rd, raw))
+        named.append(_Named(pick, ev, rd, raw, _preferred(rd, pick, tried)))
         if len(named) >= MAX_CAUSES:
             break
         nxt = _second_round(inp.target, rounds[0], named)
@@ -361,11 +383,16 @@ def _named_entry(n: _Named, rnd: int, reach: tuple[int, int]) -> CauseFit:
     from orchestrator.inverse.uncertainty import cause_uncertainty
 
     entry = _entry(n.e, n.round, rnd, n.evidence)
-    twins = n.round.twins.get(n.e.candidate, [])
+    preferred = [c.label for c in n.preferred]
+    twins = n.round.twins.get(n.e.candidate, []) + [lab for lab in preferred
+                                                    if lab not in n.round.twins.get(n.e.candidate, [])]
     sleepers = sorted(({entry.sleeper} | {o.candidate.sleeper for o in n.round.real
                                           if o.candidate.label in twins and o.candidate.cause == n.e.candidate.cause})
                       - {None})
     entry.ambiguity = {"candidates": [n.e.candidate.label] + twins, "sleepers": sleepers}
+    if preferred:
+        entry.ambiguity["ranked_above"] = (f"{', '.join(preferred)} rank(s) above it on the effective sample size "
+                                           "but remove less than the minimum share of the explainable misfit")
     if entry.sleeper is not None and entry.sleeper in reach:
         step = 1 if entry.sleeper == reach[1] else -1
         entry.ambiguity["open_beyond"] = (f"sleeper {entry.sleeper} is the outermost screened: the cause may as well "

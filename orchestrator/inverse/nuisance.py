@@ -32,6 +32,24 @@ catalogue's causes are screened:
    and none of its neighbours (other channels on its sleeper and the next ones, or on
    its rail) is off by more than :data:`NEIGHBOUR_DEV` in ``ln g`` or has no finite gain
    (a pressure cell over a void). Otherwise the channel is left to the track causes.
+   Two more parts for the channels whose noise the residual's differences can judge (all
+   but the reconstructed displacements, :mod:`orchestrator.inverse.significance`): *the
+   gain explains the channel* — with it, the channel's residual is at its own noise level
+   (:func:`~orchestrator.inverse.significance.loudness` at most
+   :data:`~orchestrator.inverse.significance.LOUD_FACTOR`, the rule that judges ``none``),
+   and *reconstructed displacements do not veto them*. Why, measured 2026-11-25 on issue
+   14's field-like passages (speed-corrected nominal run, before this rule): a void under
+   the far end of sleeper 19 raised pressure cell A6 (far end of sleeper 21, no other
+   channel there) like a gain, ln g +0.25 and +0.28 in two cases, and the old rule took it
+   for one — hiding the void the diagnosis then could not name; the gain left A6 at 14-16
+   x its noise level (29 and 25 before), where the true 13 % gain fault on A2 left it at
+   2.4 (16 before). And the displacements reconstructed from noisy accelerations scatter
+   in ``ln g`` by 0.05-0.12 on records with no gain fault at all (8 of 8 passages had
+   one beyond :data:`NEIGHBOUR_DEV`), so as neighbours they vetoed at random: B4 at
+   +0.051 vetoed the true A2. A displacement channel's own gain is still judged by the
+   group and neighbour parts only: no statistic here tells a reconstructed displacement's
+   gain fault from its reconstruction noise (the share of its misfit a gain removes was
+   0.79-0.86 for two true 13 % faults and 0.46-0.85 on fault-free channels).
 3. **Vehicle and track damping** (:func:`fit_vehicle_and_damping`). Bounded least squares
    (:func:`orchestrator.inverse.fitting.fit_unit_cube`, as the diagnosis's cause fits)
    of the wheelset mass, the primary stiffness and damping, the pads' and the bed's
@@ -290,8 +308,10 @@ def sensor_gains(target: Target, cmp: Comparison, neighbours: dict) -> tuple[dic
     Input: the target, the (speed-corrected) comparison, :func:`neighbourhoods`. Output:
     (sensor id -> accepted gain g, sensor id -> ln g of every channel).
     """
+    from orchestrator.inverse.significance import LOUD_FACTOR, loudness
+
     lg = channel_log_gains(target, cmp)
-    groups = target.layout.groups
+    groups, types = target.layout.groups, target.layout.types
     accepted = {}
     for k, x in lg.items():
         peers = [lg[j] for j in lg if groups[j] == groups[k] and np.isfinite(lg[j])]
@@ -301,9 +321,12 @@ def sensor_gains(target: Target, cmp: Comparison, neighbours: dict) -> tuple[dic
         spread = 1.4826 * float(np.median(np.abs(np.array(peers) - med)))
         if abs(x - med) <= max(GAIN_Z * spread, GAIN_MIN):
             continue
-        near = [lg[j] for j in neighbours.get(k, ()) if j in lg]
+        judged = types.get(k) == "displacement"    # a displacement's neighbours all judge; others': no displacement
+        near = [lg[j] for j in neighbours.get(k, ()) if j in lg and (judged or types.get(j) != "displacement")]
         if any(not np.isfinite(y) or abs(y) > NEIGHBOUR_DEV for y in near):
             continue     # the neighbourhood moved: a track cause, not this channel's gain
+        if not judged and loudness(target.measured.channels[k] - math.exp(x) * cmp.simulated[k]) > LOUD_FACTOR:
+            continue     # the gain leaves the channel above its noise: its shape changed, not its calibration
         accepted[k] = math.exp(x)
     return accepted, lg
 

@@ -282,6 +282,9 @@ class Evidence:
         :func:`held_out_groups`.
     reasons : list of str
         Why it fails (empty: it passes).
+    failed : list of str
+        Which parts of the rule it fails, one code per reason: ``significance``, ``share``,
+        ``worse``, ``held_out`` (empty: it passes).
     """
 
     gain: float
@@ -294,11 +297,17 @@ class Evidence:
     n_eff: float
     held_out: dict = field(default_factory=dict)
     reasons: list = field(default_factory=list)
+    failed: list = field(default_factory=list)
 
     @property
     def passes(self) -> bool:
         """All four parts of the rule hold."""
         return not self.reasons
+
+    @property
+    def short_only(self) -> bool:
+        """It fails the practical significance (the share) and nothing else."""
+        return self.failed == ["share"]
 
     def to_json(self) -> dict:
         """JSON-able dict (keys as the attributes, plus ``passes`` and the thresholds)."""
@@ -306,7 +315,7 @@ class Evidence:
         return {"gain": self.gain, "share_of_explainable_misfit": share, "objective_reference": self.objective_ref,
                 "objective_noise": self.objective_noise, "delta_bic_eff": self.delta_bic, "chi2_eff": self.chi2_eff,
                 "n_samples": self.n, "n_eff": self.n_eff, "held_out_groups": self.held_out, "passes": self.passes,
-                "reasons": list(self.reasons),
+                "reasons": list(self.reasons), "failed": list(self.failed),
                 "thresholds": {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL}}
 
 
@@ -322,18 +331,22 @@ def assess(cand: Comparison, k: int, ref: Comparison, k_ref: int, target) -> Evi
     share = (ref.objective - cand.objective) / room if room > 0 else float("nan")
     d_bic = bic_eff(ref, target.sigma, neff, k_ref) - bic_eff(cand, target.sigma, neff, k_ref + k)
     held = held_out_groups(cand, ref, target)
-    reasons = []
+    reasons, failed = [], []
     if not d_bic > DELTA_BIC:
+        failed.append("significance")
         reasons.append(f"not significant on the effective sample size (delta BIC {d_bic:.3g} <= {DELTA_BIC:g})")
     if not share >= MIN_SHARE:
+        failed.append("share")
         reasons.append(f"removes {_pct(share)} of the explainable misfit (< {100 * MIN_SHARE:.0f} %)")
     if not gain > 0:
+        failed.append("worse")
         reasons.append(f"makes the fit worse (gain {100 * gain:.2f} %)")
-    failed = [g for g, h in held.items() if not h["held"]]
-    if failed:
-        reasons.append(f"with group(s) {', '.join(failed)} held out the other groups fit worse")
+    worse_groups = [g for g, h in held.items() if not h["held"]]
+    if worse_groups:
+        failed.append("held_out")
+        reasons.append(f"with group(s) {', '.join(worse_groups)} held out the other groups fit worse")
     return Evidence(gain, share, ref.objective, j_noise, d_bic, chi2_eff(cand, target.sigma, neff), cand.n,
-                    float(sum(neff.values())), held, reasons)
+                    float(sum(neff.values())), held, reasons, failed)
 
 
 def _pct(x: float) -> str:
@@ -369,17 +382,26 @@ def step_error(coarse: Comparison, fine: Comparison, target) -> dict:
     return {"objective": j, "groups": groups, "channels": nrmse}
 
 
+def loudness(r: np.ndarray) -> float:
+    """A residual's RMS over the noise level of its own first differences (NaNs dropped; module doc).
+
+    At most :data:`LOUD_FACTOR` for noise; more for a misfit smooth at the sampling interval.
+    """
+    r = np.asarray(r, float)
+    r = r[np.isfinite(r)]
+    level = noise_sigma(r)
+    rms = float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
+    return rms / level if level > 0 else (float("inf") if rms > 0 else 0.0)   # no level (NaN, 0): any misfit
+
+
 def loud_channels(cmp: Comparison, target) -> dict:
-    """Channel id -> residual RMS / the noise level of the residual's first differences, for the channels
-    above :data:`LOUD_FACTOR` (loudest first); reconstructed displacements are not judged (module doc)."""
+    """Channel id -> :func:`loudness` of its residual, for the channels above :data:`LOUD_FACTOR` (loudest
+    first); reconstructed displacements are not judged (module doc)."""
     out = {}
     for k, r in cmp.residuals.items():
         if target.layout.types.get(k) == "displacement":
             continue
-        r = r[np.isfinite(r)]
-        level = noise_sigma(r)
-        rms = float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
-        ratio = rms / level if level > 0 else (float("inf") if rms > 0 else 0.0)   # no level (NaN, 0): any misfit
+        ratio = loudness(r)
         if ratio > LOUD_FACTOR:
             out[k] = ratio
     return dict(sorted(out.items(), key=lambda kv: -kv[1]))
@@ -491,4 +513,4 @@ def _edge(cmp: Comparison, target, sensors) -> str | None:
 __all__ = ["autocorrelation", "integrated_time", "effective_size", "channel_neff", "noise_objective", "deviance",
            "bic_eff", "chi2_eff", "held_out_groups", "Evidence", "assess", "at_noise_level", "DELTA_BIC",
            "MIN_SHARE", "CV_TOL", "NONE_MARGIN", "LOUD_FACTOR", "WINDOW_SHARE", "locate", "step_error",
-           "loud_channels"]
+           "loud_channels", "loudness"]
