@@ -129,10 +129,12 @@ def _intervals(c: dict):
 
 
 def read_answer(res: dict, error: str | None = None) -> dict:
-    """``{"kind", "causes", "where", "edge", "gain", "error", "nuisance", "dropped"}`` of a ``diagnosis.json``
-    dict (module docstring); ``kind`` is ``cause``, ``none``, ``unexplained`` or ``error``."""
+    """``{"kind", "causes", "where", "edge", "gain", "rest_quiet", "error", "nuisance", "dropped"}`` of a
+    ``diagnosis.json`` dict (module docstring); ``kind`` is ``cause``, ``none``, ``unexplained`` or ``error``;
+    ``rest_quiet``: named causes leave a residual at the noise level (the answer locates none)."""
     if error is not None:
-        return {"kind": "error", "causes": [], "where": [], "edge": [], "gain": None, "error": error}
+        return {"kind": "error", "causes": [], "where": [], "edge": [], "gain": None, "rest_quiet": False,
+                "error": error}
     named = _named_list(res)
     ans = res.get("answer")
     kind = ans.get("kind") if isinstance(ans, dict) else ans if isinstance(ans, str) else None
@@ -147,7 +149,8 @@ def read_answer(res: dict, error: str | None = None) -> dict:
                    c.get("uncertainty"), dict) else None, "gain": c.get("gain")} for c in named]
     where, edge = _where(ans) if kind == "unexplained" else ([], [])
     return {"kind": kind, "causes": causes, "where": where, "edge": edge, "gain": (res.get("gain") or {}).get("total"),
-            "error": None, "nuisance": res.get("nuisance") or (ans.get("nuisance") if isinstance(ans, dict) else None),
+            "rest_quiet": kind == "cause" and isinstance(ans, dict) and ans.get("where") is None, "error": None,
+            "nuisance": res.get("nuisance") or (ans.get("nuisance") if isinstance(ans, dict) else None),
             "dropped": res.get("dropped")}
 
 
@@ -575,11 +578,17 @@ def summary(rows: list[dict], seeds: int, wall: float | None, detect: dict | Non
     gains = {}
     for r in rows:
         if r["truth"]["effects"] and r["right"] and r["answer"]["gain"] is not None:
-            gains.setdefault(_group(r["family"]), []).append(r["answer"]["gain"])
+            gains.setdefault(_group(r["family"]), []).append((r["answer"]["gain"], r["answer"]))
     for g, v in gains.items():
         need = GAIN_MIN_MISMATCH if "with model mismatch" in g else GAIN_MIN
-        out.append(f"- gain of right answers, {g}: min {_pct(min(v))}, median {_pct(float(np.median(v)))}; "
-                   f">= {_pct(need)} in {sum(x >= need for x in v)}/{len(v)}")
+        x = [a for a, _ in v]
+        below = [ans for a, ans in v if a < need and ans["kind"] == "cause"]
+        quiet = sum(bool(ans.get("rest_quiet")) for ans in below)
+        out.append(f"- gain of right answers, {g}: min {_pct(min(x))}, median {_pct(float(np.median(x)))}; "
+                   f">= {_pct(need)} in {sum(a >= need for a in x)}/{len(x)}"
+                   + (f"; of the {len(below)} named below it, {quiet} leave the rest at the noise level "
+                      f"and {len(below) - quiet} report a residual above it with where it "
+                      "lives" if below else ""))
     inside, total, inside_id, total_id = (sum(r["coverage"][i] for r in rows) for i in range(4))
     out.append(f"- interval coverage: {inside}/{total} intervals of named causes that match the truth contain it "
                f"({inside_id}/{total_id} of those flagged identifiable)" if total

@@ -30,7 +30,9 @@ module that applies it):
    removed 62 % of J and the better-ranked pad 15 %; wrong in void_sensor+mismatch 7101,
    where the true void at 19 removed 23 % of the explainable misfit and a void at 18,
    ranked ΔBIC 75 below it, 29 %: the floor of :mod:`orchestrator.inverse.significance`,
-   "Known limits"). Where the two criteria disagree between sites of the *same* cause,
+   "Known limits"; that case was measured while the nuisance fit took the void's rise of
+   pressure cell A6 for A6's gain; since the gain must leave its channel at the noise level
+   (:mod:`orchestrator.inverse.nuisance`, stage 2) the void at 19 is named, gain 61 %). Where the two criteria disagree between sites of the *same* cause,
    neither is trusted over the other: the candidates of the named one's cause that rank
    above it and fail only the share join its ambiguity set (:func:`_preferred`;
    ``ambiguity.ranked_above`` says which), so the answer is "a void at 18 or 19", not a

@@ -44,12 +44,14 @@ catalogue's causes are screened:
    for one — hiding the void the diagnosis then could not name; the gain left A6 at 14-16
    x its noise level (29 and 25 before), where the true 13 % gain fault on A2 left it at
    2.4 (16 before). And the displacements reconstructed from noisy accelerations scatter
-   in ``ln g`` by 0.05-0.12 on records with no gain fault at all (8 of 8 passages had
-   one beyond :data:`NEIGHBOUR_DEV`), so as neighbours they vetoed at random: B4 at
-   +0.051 vetoed the true A2. A displacement channel's own gain is still judged by the
+   in ``ln g`` by up to 0.05-0.12 on channels with no gain fault (6 of the 8 passages
+   examined had such a channel beyond :data:`NEIGHBOUR_DEV`), so as neighbours they vetoed
+   at random: B4 at +0.051 vetoed the true A2. A displacement channel's own gain is still judged by the
    group and neighbour parts only: no statistic here tells a reconstructed displacement's
    gain fault from its reconstruction noise (the share of its misfit a gain removes was
-   0.79-0.86 for two true 13 % faults and 0.46-0.85 on fault-free channels).
+   0.79-0.86 for two true 13 % faults and 0.46-0.85 on fault-free channels the old rule
+   took for faults or that stood out as much). So the true faults on B3 and B1 of two such
+   passages stay unfound (left to the residual; those two diagnoses answered ``unexplained`` and ``none``).
 3. **Vehicle and track damping** (:func:`fit_vehicle_and_damping`). Bounded least squares
    (:func:`orchestrator.inverse.fitting.fit_unit_cube`, as the diagnosis's cause fits)
    of the wheelset mass, the primary stiffness and damping, the pads' and the bed's
@@ -321,11 +323,11 @@ def sensor_gains(target: Target, cmp: Comparison, neighbours: dict) -> tuple[dic
         spread = 1.4826 * float(np.median(np.abs(np.array(peers) - med)))
         if abs(x - med) <= max(GAIN_Z * spread, GAIN_MIN):
             continue
-        judged = types.get(k) == "displacement"    # a displacement's neighbours all judge; others': no displacement
-        near = [lg[j] for j in neighbours.get(k, ()) if j in lg and (judged or types.get(j) != "displacement")]
+        displacement = types.get(k) == "displacement"   # every neighbour judges a displacement; none judges the others
+        near = [lg[j] for j in neighbours.get(k, ()) if j in lg and (displacement or types.get(j) != "displacement")]
         if any(not np.isfinite(y) or abs(y) > NEIGHBOUR_DEV for y in near):
             continue     # the neighbourhood moved: a track cause, not this channel's gain
-        if not judged and loudness(target.measured.channels[k] - math.exp(x) * cmp.simulated[k]) > LOUD_FACTOR:
+        if not displacement and loudness(target.measured.channels[k] - math.exp(x) * cmp.simulated[k]) > LOUD_FACTOR:
             continue     # the gain leaves the channel above its noise: its shape changed, not its calibration
         accepted[k] = math.exp(x)
     return accepted, lg
