@@ -32,8 +32,9 @@ module that applies it):
    ranked ΔBIC 75 below it, 29 %: the floor of :mod:`orchestrator.inverse.significance`,
    "Known limits"; that case was measured while the nuisance fit took the void's rise of
    pressure cell A6 for A6's gain; since the gain must leave its channel at the noise level
-   (:mod:`orchestrator.inverse.nuisance`, stage 2) the void at 19 is named, gain 61 %). Where the two criteria disagree between sites of the *same* cause,
-   neither is trusted over the other: the candidates of the named one's cause that rank
+   (:mod:`orchestrator.inverse.nuisance`, stage 2) the void at 19 is named, gain 61 %).
+   Where the two criteria disagree between sites of the *same* cause, neither is trusted
+   over the other: the candidates of the named one's cause that rank
    above it and fail only the share join its ambiguity set (:func:`_preferred`;
    ``ambiguity.ranked_above`` says which), so the answer is "a void at 18 or 19", not a
    confident wrong sleeper. A better-ranked candidate of *another* cause does not: a
@@ -320,7 +321,8 @@ def _preferred(rd: Round, pick: Evaluated, tried: dict) -> list[Candidate]:
     too (:func:`_named_entry`), so a site the ranking prefers is never dropped silently.
     """
     above = rd.real[:rd.real.index(pick)]
-    return [o.candidate for o in above if o.candidate.cause == pick.candidate.cause and tried[o.candidate].short_only]
+    return [o.candidate for o in above
+            if o.candidate.cause == pick.candidate.cause and tried[o.candidate].fails_only_share]
 
 
 def _rounds(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated) -> tuple[list[_Named], list[Round], dict]:
@@ -386,8 +388,8 @@ def _named_entry(n: _Named, rnd: int, reach: tuple[int, int]) -> CauseFit:
 
     entry = _entry(n.e, n.round, rnd, n.evidence)
     preferred = [c.label for c in n.preferred]
-    twins = n.round.twins.get(n.e.candidate, []) + [lab for lab in preferred
-                                                    if lab not in n.round.twins.get(n.e.candidate, [])]
+    close = n.round.twins.get(n.e.candidate, [])
+    twins = close + [lab for lab in preferred if lab not in close]
     sleepers = sorted(({entry.sleeper} | {o.candidate.sleeper for o in n.round.real
                                           if o.candidate.label in twins and o.candidate.cause == n.e.candidate.cause})
                       - {None})

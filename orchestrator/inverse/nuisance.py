@@ -96,6 +96,7 @@ import numpy as np
 from orchestrator.inputs.causes import CATALOGUE
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import comparison
+from orchestrator.inverse.significance import LOUD_FACTOR, loudness
 
 WARP_SPAN = 0.10       # speed ratios searched by the warp: 1 +- this (a speed log a few % off, with room)
 WARP_STEP = 0.0025     # grid of the warp's ratio (the parabola refines between nodes)
@@ -310,8 +311,6 @@ def sensor_gains(target: Target, cmp: Comparison, neighbours: dict) -> tuple[dic
     Input: the target, the (speed-corrected) comparison, :func:`neighbourhoods`. Output:
     (sensor id -> accepted gain g, sensor id -> ln g of every channel).
     """
-    from orchestrator.inverse.significance import LOUD_FACTOR, loudness
-
     lg = channel_log_gains(target, cmp)
     groups, types = target.layout.groups, target.layout.types
     accepted = {}

@@ -311,7 +311,7 @@ class Evidence:
         return not self.reasons
 
     @property
-    def short_only(self) -> bool:
+    def fails_only_share(self) -> bool:
         """It fails the practical significance (the share) and nothing else."""
         return self.failed == ["share"]
 
