@@ -410,14 +410,18 @@ class TrackCosim:
         self.rail_w = out[:, 3]
         self.Fz_coupling = 1.5 * self.Fz - 0.5 * self._Fz_last if self.extrapolate_force else self.Fz
         self._Fz_last = self.Fz
+        self.check_divergence()
+        if self.record_every and self.integ.k % self.record_every == 0:
+            self._record(x)
+        return self.Fz
+
+    def check_divergence(self) -> None:
+        """Raise :class:`DivergenceError` when a contact force is at or above its limit, or NaN."""
         if not (self.Fz < self._limit).all():  # also catches NaN
             i = int(np.argmax(np.where(np.isfinite(self.Fz), self.Fz, np.inf)))
             raise DivergenceError(
                 f"the coupled solution diverged at t = {self.integ.t:.6g} s with the communication step "
-                f"{h:.3g} s (contact force on wheel {i + 1}: {self.Fz[i]:.4g} N); reduce simulation.step")
-        if self.record_every and self.integ.k % self.record_every == 0:
-            self._record(x)
-        return self.Fz
+                f"{self.h:.3g} s (contact force on wheel {i + 1}: {self.Fz[i]:.4g} N); reduce simulation.step")
 
     def _irregularity(self, x: np.ndarray) -> np.ndarray:
         """Each wheel's irregularity input at x [m] (zeros without irregularities)."""

@@ -118,7 +118,7 @@ def kernel_enabled(flag: bool | None = None) -> bool:
 
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
-_KERNEL_SOURCES = ("kernel.py", "contact.py", "ballast.py")  # what the compiled code is made of
+_KERNEL_SOURCES = ("kernel.py", "contact.py", "ballast.py", "fused.py")  # what the compiled code is made of
 
 
 def _cache_locator():
@@ -1134,6 +1134,19 @@ class CompiledContacts:
             side = self.sides[i]
             surf[i] = self.geometry(side, running(side, xi)).heights(xi)
 
+    def raise_for(self, status: int, change: float) -> None:
+        """Raise the :class:`track.dynamics.ConvergenceError` of a failed step (``status`` of
+        :func:`contact_step`, ``change`` its last force change [N]) at the integrator's time."""
+        from .dynamics import ConvergenceError
+        it = self.integ
+        t1 = it.t + it.h
+        if status == NEWTON_FAILED:
+            raise ConvergenceError(f"contact forces at t = {t1:.6g} s did not converge; "
+                                   f"reduce the step h = {it.h:.3g} s")
+        raise ConvergenceError(
+            f"track step at t = {t1:.6g} s did not converge in {int(self.par[P_MAXPASS])} iterations "
+            f"(last force change {change:.3g} N); reduce the step h = {it.h:.3g} s")
+
     # ------------------------------------------------------------------ step
     def step(self, x: np.ndarray, z_wheel: np.ndarray, c_h: float, y: np.ndarray | None = None) -> np.ndarray:
         """One step; same contract as :meth:`TrackIntegrator.step_contacts` with the wheels at x [m]
@@ -1167,14 +1180,7 @@ class CompiledContacts:
         c.solves += int(cnt[C_SOLVES])
         c.contact_newton += int(cnt[C_NEWTON])
         if status != OK:
-            from .dynamics import ConvergenceError
-            t1 = it.t + it.h
-            if status == NEWTON_FAILED:
-                raise ConvergenceError(f"contact forces at t = {t1:.6g} s did not converge; "
-                                       f"reduce the step h = {it.h:.3g} s")
-            raise ConvergenceError(
-                f"track step at t = {t1:.6g} s did not converge in {int(self.par[P_MAXPASS])} iterations "
-                f"(last force change {change:.3g} N); reduce the step h = {it.h:.3g} s")
+            self.raise_for(status, change)
         c.iterations += int(cnt[C_PASSES])
         if cnt[C_MAXPASS] > c.max_iterations:
             c.max_iterations = int(cnt[C_MAXPASS])

@@ -177,6 +177,15 @@ class VehicleStepper:
         np.dot(self._Y, self._y, out=self._wheel)
         self._wheel += self._wheel_offset
 
+    def discrete_system(self) -> tuple:
+        """``(G, z, y, u, ynew, Y, wheel, woff)``: the zoh step ``ynew = G z`` with ``z = [y | u | 1]``,
+        the wheel outputs ``wheel = [z | vz] = Y y + woff``, and the buffers :meth:`step` works in
+        (views of this stepper's state: a caller that steps them itself, e.g. ``track.fused``, keeps
+        this object's state, but for :attr:`steps`). Needs a step size and ``hold="zoh"``."""
+        if self._G is None or self.hold != "zoh":
+            raise RuntimeError("discrete_system: needs a step size (set_step) and hold='zoh'")
+        return self._G, self._z, self._y, self._u, self._ynew, self._Y, self._wheel, self._wheel_offset
+
     # ----------------------------------------------------------------- state
     @property
     def q(self) -> np.ndarray:
