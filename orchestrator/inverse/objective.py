@@ -142,9 +142,13 @@ def on_measured_base(measured, t_sim: np.ndarray, sim: dict, shift: float, types
     t_new = measured.t - shift
     inside = (t_new >= t_sim[0]) & (t_new <= t_sim[-1])
     out = {}
-    for k, y in sim.items():
+    ids = list(sim)
+    # one spline of all channels (columns): the same banded solve and evaluation per column as a
+    # spline per channel, without a spline object per channel (a third of the function's time)
+    on = CubicSpline(t_sim, np.column_stack([sim[k] for k in ids]))(t_new[inside]) if ids else None
+    for j, k in enumerate(ids):
         s = np.full(t_new.shape, np.nan)
-        s[inside] = CubicSpline(t_sim, y)(t_new[inside])
+        s[inside] = on[:, j]
         if types is not None and highpass is not None and types.get(k) == "displacement" and inside.any():
             idx = np.flatnonzero(inside)
             filled = np.interp(np.arange(s.size), idx, s[idx])   # edges held: the integration needs a full window
@@ -220,6 +224,35 @@ def channel_scales(measured, groups: dict) -> tuple[dict, dict]:
     return scale, sigma
 
 
+def _channel_scales(k, m: np.ndarray, ok: np.ndarray, sigma: dict, scale: dict | None) -> tuple[float, float]:
+    """Channel ``k``'s nRMSE normaliser and the sigma its chi-square divides by (:func:`score`)."""
+    sc = float(np.std(m[ok])) if scale is None else scale[k]
+    sg = max(sigma.get(k, np.nan), NOISE_FLOOR * sc) if np.isfinite(sigma.get(k, np.nan)) else sc
+    return sc, sg
+
+
+def chi2_rows(measured, rows: np.ndarray, ids: list, sizes: np.ndarray, sigma: dict,
+              scale: dict | None = None, gains: dict | None = None) -> np.ndarray:
+    """The chi-square :func:`score` gives each row of ``rows`` (many simulations on the measured
+    base at once: channel ``ids[i]`` in columns ``sizes[i]:sizes[i+1]``), to rank them.
+
+    The same terms, summed over whole arrays (another order of additions: equal to
+    :func:`score`'s to round-off, not to the last bit). A row whose channel has fewer than
+    2 valid samples gets NaN (:func:`score` raises there).
+    """
+    gains = gains or {}
+    out = np.zeros(rows.shape[0])
+    for i, k in enumerate(ids):
+        m = measured.channels[k]
+        r = gains.get(k, 1.0) * rows[:, sizes[i]:sizes[i + 1]] - m
+        ok = np.isfinite(r)
+        n = ok.sum(axis=1)
+        _, sg = _channel_scales(k, m, ok[0], sigma, scale)
+        out += np.where(ok, (r / sg) ** 2, 0.0).sum(axis=1)
+        out[n < 2] = np.nan
+    return out
+
+
 def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: float = 0.0,
           scale: dict | None = None, gains: dict | None = None) -> Comparison:
     """:class:`Comparison` of a simulation already on the measured time base (``on``: id -> (nt,)).
@@ -246,9 +279,8 @@ def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: f
             r = np.where(ok, r, np.nan)
         rok = r[ok] if n < r.size else r           # all finite (the usual case): no copy
         rmse = float(np.sqrt(np.mean(rok ** 2)))
-        sc = float(np.std(m[ok])) if scale is None else scale[k]
+        sc, sg = _channel_scales(k, m, ok, sigma, scale)
         nr = rmse / sc if sc > 0 else float("inf")
-        sg = max(sigma.get(k, np.nan), NOISE_FLOOR * sc) if np.isfinite(sigma.get(k, np.nan)) else sc
         chi2 += float(np.sum((rok / sg) ** 2))
         n_all += n
         channels[k] = _ChannelFit(measured.t, r, rmse=rmse, nrmse=nr, n=n)
@@ -258,7 +290,8 @@ def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: f
     return Comparison(float(shift), channels, gmean, J, chi2, n_all, residuals, on)
 
 
-__all__ = ["Comparison", "Target", "channel_scales", "compare", "score", "on_measured_base", "noise_sigma", "objective_from_channels"]
+__all__ = ["Comparison", "Target", "channel_scales", "chi2_rows", "compare", "score", "on_measured_base", "noise_sigma",
+           "objective_from_channels"]
 
 
 # ------------------------------------------------------------------------------------------
@@ -331,6 +364,10 @@ class Target:
         lay = self.layout
         return score(self.measured, on, lay.groups, lay.weights, self.sigma, self.shift or 0.0, self.scale,
                      self.gains)
+
+    def chi2_rows(self, rows: np.ndarray, ids: list, sizes: np.ndarray) -> np.ndarray:
+        """:func:`chi2_rows` of many simulations on the measured time base (to rank them)."""
+        return chi2_rows(self.measured, rows, ids, sizes, self.sigma, self.scale, self.gains)
 
     def weighted_residuals(self, cmp: Comparison) -> np.ndarray:
         """One vector whose sum of squares is ``sum_g w_g mean_{i in g} nRMSE_i^2 / sum_g w_g``.
