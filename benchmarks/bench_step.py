@@ -177,7 +177,8 @@ def main() -> None:
         print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:.2f} | {r[3] / r[4] * 1e6:.0f} | {r[5]:.3f} | {r[6]:.1f} |")
     for label in CASES:
         by = {(r[1], r[2]): r[3] for r in rows.values() if r[0] == label}
-        fmu, loop, step = by[("fmu", "compiled")], by[("inprocess", "compiled loop")], by[("inprocess", "compiled step")]
+        fmu, loop, step = (by[("fmu", "compiled")], by[("inprocess", "compiled loop")],
+                           by[("inprocess", "compiled step")])
         print(f"{label}: FMU / in-process {fmu / loop:.2f} (compiled loop), {fmu / step:.2f} (compiled step); "
               f"stepped / compiled loop in-process {step / loop:.2f}; numpy / compiled loop "
               f"{by[('inprocess', 'numpy')] / loop:.2f}")

@@ -26,13 +26,13 @@ SIGNALS = ("t", "x", "z", "vz", "Fz", "parts", "rail_z")
 RTOL = 1e-9
 
 
-def _crossing_scenario(duration: float = 0.06):
+def _crossing_scenario(duration: float = 0.06, extra: tuple = ()):
     """The default scenario, front wheelset 0.8 m before the crossing's theoretical point, at a
     step of 50 us with an output every 100 us (two steps per signal row)."""
     sc = load_scenario(DEFAULT)
     x_tcp = build_layout(sc.track.layout).x_tcp
     return load_scenario(DEFAULT, [f"simulation.x_start={x_tcp - 0.8}", f"simulation.duration={duration}",
-                                   "simulation.step=5e-5", "simulation.output_step=1e-4"])
+                                   "simulation.step=5e-5", "simulation.output_step=1e-4", *extra])
 
 
 def _spy(monkeypatch) -> list:
@@ -67,16 +67,18 @@ def _assert_same(a, b) -> None:
     assert cb.linear_solves >= cb.track_steps
 
 
-def test_the_compiled_loop_gives_the_stepped_loops_numbers(monkeypatch):
+@pytest.mark.parametrize("extra", [(), ("track.crossing.geometry=profiles", "vehicle.lateral_offset=0.003")])
+def test_the_compiled_loop_gives_the_stepped_loops_numbers(monkeypatch, extra):
     """Through the crossing (the wheels enter new elements: the kernel returns to Python to load
     them and is resumed), two steps per output row, the sensor columns a diagnosis records:
-    signals, record and counters as the one-call-a-time loop."""
+    signals, record and counters as the one-call-a-time loop; with the crossing's dip and with the
+    profile contact's tables at a constant lateral offset."""
     from orchestrator.cosim.sensing import sensor_columns
     from orchestrator.inputs.sensor_layout import layout_of, resolve
     from orchestrator.inputs.track_model import track_model
     from track.sensors import compile_sensors
 
-    sc = _crossing_scenario()
+    sc = _crossing_scenario(extra=extra)
     model = track_model(sc.track)
     cols = sensor_columns(model, compile_sensors(model, resolve(layout_of(sc), model)))
     a, b = _both(monkeypatch, sc, record_states=True, record_columns=cols)

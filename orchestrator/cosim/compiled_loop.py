@@ -44,8 +44,8 @@ class CompiledLoop:
         self.steps = CoupledSteps(run.track.engine, veh.stepper.discrete_system(), veh.model.wheel_offsets,
                                   veh.x0, veh.speed)
 
-    def advance(self, k: int, Fz, signals, progress: Callable[[int, int], None] | None):
-        """Steps ``k ..`` to the run's end from the vehicle's input ``Fz`` [N]; returns the next input.
+    def advance(self, k: int, Fz, signals, progress: Callable[[int, int], None] | None) -> None:
+        """Steps ``k ..`` to the run's end from the vehicle's input ``Fz`` [N].
 
         ``signals`` (the master's ``_Signals``) gets its rows; ``progress(k, nsteps)`` is called
         at output steps between blocks. A unit's error propagates once the objects are updated."""
@@ -61,7 +61,6 @@ class CompiledLoop:
                 self._after(k_start, signals)
             if progress is not None and k % every == 0:
                 progress(k, nsteps)
-        return Fz
 
     def _after(self, k_start: int, signals) -> None:
         """The vehicle unit and the signals as the stepped loop leaves them (also after an error)."""

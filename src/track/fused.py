@@ -15,8 +15,9 @@ The vehicle comes in as arrays, so this module knows nothing of the vehicle pack
 discretisation of a linear vehicle with the force held over the step (``vehicle.stepper``,
 ``"zoh"``): ``y_{k+1} = G [y_k | Fz_k | 1]`` and the wheels' ``[z | vz] = Y y + offset``, with
 the wheel coordinates ``x = a_i + (x0 + v t)``. Every operation is the one the stepped path does,
-in the same order (the products through the same BLAS ``dgemv``, the track's step the same
-compiled function), so both paths give the same numbers (tests/test_fused.py).
+in the same order (the track's step the same compiled function; the vehicle's products ``dgemv``
+calls, numba's through scipy's BLAS where numpy uses its own), so both paths give the same numbers:
+to the last bit here, to round-off wherever the two BLAS builds round differently (tests/test_fused.py).
 
 :class:`CoupledSteps` holds the arguments (the track's from its
 :class:`~track.kernel.CompiledContacts`, the vehicle's buffers, which it updates in place) and
@@ -78,6 +79,50 @@ def _vehicle_step(veh, Fz_in):
 
 
 @_njit
+def _wheels_in(base, xoff, wheel, zoff, xw, zc):
+    """The track's wheel inputs: ``x = xoff + base`` [m], ``z`` (the vehicle's) + the static offsets [m]."""
+    for i in range(xw.size):
+        xw[i] = xoff[i] + base
+        zc[i] = wheel[i] + zoff[i]
+
+
+@_njit
+def _track_outputs(out, trk, limit, extrap_force):
+    """The track unit's outputs from the kernel's ``out`` (as ``TrackCosim.do_step``), the vehicle's next
+    input; False when a force is at or above its limit (or NaN)."""
+    _, Fz_in, Fz, Fz_last, Fz_cpl, parts, rail_w, _, _ = trk
+    ok = True
+    for i in range(Fz.size):
+        Fz[i] = out[i, 0]
+        parts[i, 0] = out[i, 1]
+        parts[i, 1] = out[i, 2]
+        rail_w[i] = out[i, 3]
+        Fz_cpl[i] = 1.5 * Fz[i] - 0.5 * Fz_last[i] if extrap_force else Fz[i]
+        Fz_last[i] = Fz[i]
+        Fz_in[i] = Fz_cpl[i]
+        if not Fz[i] < limit[i]:   # also NaN
+            ok = False
+    return ok
+
+
+@_njit
+def _signal_row(sig, j, t, xw, wheel, trk):
+    """Row ``j`` of the master's signals at time ``t`` [s]: the wheels' x, z, vz and the track's outputs."""
+    st, sx, sz, svz, sFz, sparts, srail = sig
+    Fz, parts, rail_w = trk[2], trk[5], trk[6]
+    m = xw.size
+    st[j] = t
+    for i in range(m):
+        sx[j, i] = xw[i]
+        sz[j, i] = wheel[i]
+        svz[j, i] = wheel[m + i]
+        sFz[j, i] = Fz[i]
+        sparts[j, i, 0] = parts[i, 0]
+        sparts[j, i, 1] = parts[i, 1]
+        srail[j, i] = rail_w[i]
+
+
+@_njit
 def gauss_seidel_steps(k, k_end, resume, t0, h, every, veh, xoff, x0, speed,
                        P, Q, V, A, F, Fc, c, out, trk, limit, extrap_force, k_track, t0_track, record_every,
                        rec, rec_n, sig, tot):
@@ -115,17 +160,12 @@ def gauss_seidel_steps(k, k_end, resume, t0, h, every, veh, xoff, x0, speed,
         (step k - 1 gave a force at or above ``limit``: the outputs hold it), or the kernel's failure
         (step k not taken; ``change`` its last force change [N]).
     """
-    zoff, Fz_in, Fz, Fz_last, Fz_cpl, parts, rail_w, xw, zc = trk
-    wheel = veh[6]
+    wheel, xw, zc = veh[6], trk[7], trk[8]
     cnt = P[1]
-    m = Fz.size
     while k < k_end:
         if not resume:
-            _vehicle_step(veh, Fz_in)
-            base = x0 + speed * (t0 + k * h + h)    # the vehicle unit's time after its step
-            for i in range(m):
-                xw[i] = xoff[i] + base
-                zc[i] = wheel[i] + zoff[i]
+            _vehicle_step(veh, trk[1])
+            _wheels_in(x0 + speed * (t0 + k * h + h), xoff, wheel, trk[0], xw, zc)   # the vehicle's time after its step
         resume = False
         cnt[:] = 0
         status, change = _call_kernel(P, Q, V, A, F, Fc, c, xw, zc, out)
@@ -136,41 +176,19 @@ def gauss_seidel_steps(k, k_end, resume, t0, h, every, veh, xoff, x0, speed,
         if status != OK:
             return status, k, c, k_track, rec_n, change
         tot[2] += cnt[C_PASSES]
-        if cnt[C_MAXPASS] > tot[3]:
-            tot[3] = cnt[C_MAXPASS]
+        tot[3] = max(tot[3], cnt[C_MAXPASS])
         tot[4] += 1
         c = 1 - c
         k_track += 1
         k += 1
-        ok = True
-        for i in range(m):
-            Fz[i] = out[i, 0]
-            parts[i, 0] = out[i, 1]
-            parts[i, 1] = out[i, 2]
-            rail_w[i] = out[i, 3]
-            Fz_cpl[i] = 1.5 * Fz[i] - 0.5 * Fz_last[i] if extrap_force else Fz[i]
-            Fz_last[i] = Fz[i]
-            Fz_in[i] = Fz_cpl[i]
-            if not Fz[i] < limit[i]:   # also NaN
-                ok = False
-        if not ok:
+        if not _track_outputs(out, trk, limit, extrap_force):
             return DIVERGED, k, c, k_track, rec_n, 0.0
         if record_every > 0 and k_track % record_every == 0:
-            record_row(rec_n, t0_track + k_track * h, xw, Fz, parts, Q[c], V[c], A[c],
+            record_row(rec_n, t0_track + k_track * h, xw, trk[2], trk[5], Q[c], V[c], A[c],
                        rec[0], rec[1], rec[2], rec[3], rec[4], rec[5], rec[6], rec[7], rec[8], rec[9])
             rec_n += 1
         if k % every == 0:
-            j = k // every
-            st, sx, sz, svz, sFz, sparts, srail = sig
-            st[j] = t0 + k * h
-            for i in range(m):
-                sx[j, i] = xw[i]
-                sz[j, i] = wheel[i]
-                svz[j, i] = wheel[m + i]
-                sFz[j, i] = Fz[i]
-                sparts[j, i, 0] = parts[i, 0]
-                sparts[j, i, 1] = parts[i, 1]
-                srail[j, i] = rail_w[i]
+            _signal_row(sig, k // every, t0 + k * h, xw, wheel, trk)
     return DONE, k, c, k_track, rec_n, 0.0
 
 
