@@ -1,7 +1,7 @@
 """The in-process Gauss–Seidel loop in compiled blocks of steps (``track.fused``).
 
 The master steps the units one call at a time (:func:`orchestrator.cosim.master._step_loop`),
-which costs as much Python per step as the compiled track step itself takes. When both units are
+which costs about as much Python per step as the compiled track step itself takes. When both units are
 ours and in-process, the algorithm is Gauss–Seidel and the track's step is the compiled one
 without Python-side inputs (``track.fused.fused_unavailable``), the steps after the first (which
 initializes the track) run in :class:`track.fused.CoupledSteps` instead, in blocks between
@@ -67,9 +67,7 @@ class CompiledLoop:
         run, veh, st = self.run_, self.run_.vehicle, self.steps
         nv = st.vehicle_steps
         if nv:
-            veh.stepper.steps += nv
-            veh.t = run.t0 + (k_start + nv - 1) * run.h + run.h
-            veh._last = None
+            veh.advanced(nv, run.t0 + (k_start + nv - 1) * run.h + run.h)   # as the last step's t + h
         signals.done = max(signals.done, st.signal_steps // run.every + 1)
 
 

@@ -11,7 +11,7 @@ FMU mapped through the scenario's ``ports``) through FMPy's low-level API;
 ``inprocess`` steps the same model objects (``vehicle.VehicleStepper``,
 ``track.cosim.TrackCosim``) without the FMU boundary; with Gauss–Seidel, after the first
 step, in blocks of steps in one compiled call (:mod:`orchestrator.cosim.compiled_loop`: the
-same numbers, half the wall time of a diagnosis's runs).
+same numbers, a quarter less loop time, benchmarks/RESULTS.md).
 
 Algorithms (registry :data:`ALGORITHMS`), fixed communication step ``h`` counted by
 an integer (``t_k = t0 + k h``):

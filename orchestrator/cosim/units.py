@@ -79,6 +79,13 @@ class InProcessVehicle:
         self.stepper.step(Fz)
         self.t = t + h
 
+    def advanced(self, steps: int, t: float) -> None:
+        """The stepper's buffers were advanced ``steps`` steps to time ``t`` [s] by a compiled loop
+        (``stepper.discrete_system``, :mod:`orchestrator.cosim.compiled_loop`): count them."""
+        self.stepper.steps += steps
+        self.t = t
+        self._last = None
+
     def outputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Wheel ``x`` [m], ``z`` [m] (up +), ``vz`` [m/s] at the unit's time: copies the caller owns.
 

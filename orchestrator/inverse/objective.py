@@ -224,7 +224,7 @@ def channel_scales(measured, groups: dict) -> tuple[dict, dict]:
     return scale, sigma
 
 
-def _channel_scales(k, m: np.ndarray, ok: np.ndarray, sigma: dict, scale: dict | None) -> tuple[float, float]:
+def _scale_and_sigma(k, m: np.ndarray, ok: np.ndarray, sigma: dict, scale: dict | None) -> tuple[float, float]:
     """Channel ``k``'s nRMSE normaliser and the sigma its chi-square divides by (:func:`score`)."""
     sc = float(np.std(m[ok])) if scale is None else scale[k]
     sg = max(sigma.get(k, np.nan), NOISE_FLOOR * sc) if np.isfinite(sigma.get(k, np.nan)) else sc
@@ -247,7 +247,7 @@ def chi2_rows(measured, rows: np.ndarray, ids: list, sizes: np.ndarray, sigma: d
         r = gains.get(k, 1.0) * rows[:, sizes[i]:sizes[i + 1]] - m
         ok = np.isfinite(r)
         n = ok.sum(axis=1)
-        _, sg = _channel_scales(k, m, ok[0], sigma, scale)
+        _, sg = _scale_and_sigma(k, m, ok[0], sigma, scale)
         out += np.where(ok, (r / sg) ** 2, 0.0).sum(axis=1)
         out[n < 2] = np.nan
     return out
@@ -279,7 +279,7 @@ def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: f
             r = np.where(ok, r, np.nan)
         rok = r[ok] if n < r.size else r           # all finite (the usual case): no copy
         rmse = float(np.sqrt(np.mean(rok ** 2)))
-        sc, sg = _channel_scales(k, m, ok, sigma, scale)
+        sc, sg = _scale_and_sigma(k, m, ok, sigma, scale)
         nr = rmse / sc if sc > 0 else float("inf")
         chi2 += float(np.sum((rok / sg) ** 2))
         n_all += n
