@@ -13,6 +13,8 @@ from __future__ import annotations
 import os
 from typing import Callable
 
+from orchestrator.cosim.units import InProcessTrack, InProcessVehicle
+
 COMPILED_LOOP_ENV = "TURNOUT_COMPILED_LOOP"   # "0": the master steps the units one call at a time
 PROGRESS_STEPS = 500   # steps between progress reports (rounded up to output steps)
 
@@ -20,8 +22,6 @@ PROGRESS_STEPS = 500   # steps between progress reports (rounded up to output st
 def compiled_loop(run) -> "CompiledLoop | None":
     """A :class:`CompiledLoop` for ``run`` (a ``master._Run`` after its first step), or None where
     the units cannot run in one (see the module docstring)."""
-    from orchestrator.cosim.units import InProcessTrack, InProcessVehicle
-
     if os.environ.get(COMPILED_LOOP_ENV, "").strip() == "0" or run.algorithm != "gauss-seidel":
         return None
     veh, trk = run.vehicle, run.track
@@ -39,7 +39,7 @@ class CompiledLoop:
     def __init__(self, run):
         from track.fused import CoupledSteps
 
-        self.run_ = run
+        self._run = run
         veh = run.vehicle
         self.steps = CoupledSteps(run.track.engine, veh.stepper.discrete_system(), veh.model.wheel_offsets,
                                   veh.x0, veh.speed)
@@ -49,7 +49,7 @@ class CompiledLoop:
 
         ``signals`` (the master's ``_Signals``) gets its rows; ``progress(k, nsteps)`` is called
         at output steps between blocks. A unit's error propagates once the objects are updated."""
-        run = self.run_
+        run = self._run
         veh, every, nsteps = run.vehicle, run.every, run.nsteps
         block = nsteps if progress is None else -(-PROGRESS_STEPS // every) * every   # ends at output steps
         sig = (signals.t, signals.x, signals.z, signals.vz, signals.Fz, signals.parts, signals.rail_z)
@@ -64,7 +64,7 @@ class CompiledLoop:
 
     def _after(self, k_start: int, signals) -> None:
         """The vehicle unit and the signals as the stepped loop leaves them (also after an error)."""
-        run, veh, st = self.run_, self.run_.vehicle, self.steps
+        run, veh, st = self._run, self._run.vehicle, self.steps
         nv = st.vehicle_steps
         if nv:
             veh.advanced(nv, run.t0 + (k_start + nv - 1) * run.h + run.h)   # as the last step's t + h

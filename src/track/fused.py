@@ -234,7 +234,7 @@ class CoupledSteps:
             cc.yw[:] = engine.lateral_offsets(np.zeros(engine.n))   # a constant offset (no table)
         self.engine, self.cc = engine, cc
         self.P = tuple(a for i, a in enumerate(cc._args) if i not in slots)
-        self.veh = tuple(np.ascontiguousarray(a) if i in (0, 5, 7) else a for i, a in enumerate(vehicle))
+        self.veh = tuple(vehicle)
         self.xoff, self.x0, self.speed = np.ascontiguousarray(xoff, dtype=float), float(x0), float(speed)
         n, m = engine.model.n, engine.n
         self.Q, self.V, self.A, self.F = (np.empty((2, n)) for _ in range(4))

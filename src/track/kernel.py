@@ -1122,7 +1122,7 @@ class CompiledContacts:
         if any((body.name, r) not in cache for r in ids):
             last = min(e + INFLUENCE_AHEAD, _element_count(body))
             want: dict = {}                    # row id -> (element, row of its load rows)
-            for el in range(e, max(last, e + 1)):   # e itself even if the count were off
+            for el in range(e, last):
                 for j, r in enumerate(_row_ids(body, el)):
                     if (body.name, r) not in cache and r not in want:
                         want[r] = (el, j)
