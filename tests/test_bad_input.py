@@ -387,6 +387,24 @@ def test_a_file_name_holding_a_line_separator_is_still_a_one_line_error(tmp_path
     assert_one_line_exit_2(rc, err, "sensors", "file not found")
 
 
+@pytest.mark.parametrize("name", ["x" * 300, "a\x00b"])
+def test_a_path_the_system_refuses_is_a_scenario_error(tmp_path, name):
+    """Found by the property test below (session 11's CI: ``sensors: "xxx...x"``, 300 characters): the
+    operating system refuses a file name over 255 bytes (ENAMETOOLONG) and Python one holding a NUL;
+    both must be a one-line ScenarioError naming the key (they escaped as OSError / ValueError), and a
+    one-line exit 2 on the CLI."""
+    scenario = copy.deepcopy(BASE)
+    scenario["sensors"] = name
+    with pytest.raises(ScenarioError, match="sensors.*not a usable path") as exc:
+        scenario_from_dict(scenario)
+    assert "\n" not in str(exc.value)
+    if "\x00" not in name:    # a NUL cannot pass through the YAML file unquoted: the API case above covers it
+        path = tmp_path / "long.yaml"
+        path.write_text(dump_yaml(scenario), encoding="utf-8")
+        rc, _, err = cli(["run", path, "--dry-run"])
+        assert_one_line_exit_2(rc, err, "sensors", "not a usable path")
+
+
 def test_property_mutated_scenarios_are_valid_or_one_line_exit_2(tmp_path):
     """>= 200 random mutations, each validated as `turnout run --dry-run` does: exit 0 or a one-line exit 2.
 

@@ -250,11 +250,16 @@ class FilePath(Node):
             return value
         if self.suffix and not value.lower().endswith(self.suffix):
             raise Invalid(path, f"expected {self.doc}, got {value!r}{_hint(value, self.keywords)}")
-        p = Path(os.path.expanduser(value))
-        p = (p if p.is_absolute() else ctx.base_dir / p).resolve()
-        if not p.exists():
+        try:   # the operating system may refuse the name itself (too long, a NUL byte)
+            p = Path(os.path.expanduser(value))
+            p = (p if p.is_absolute() else ctx.base_dir / p).resolve()
+            found, is_file = p.exists(), p.is_file()
+        except (OSError, ValueError) as exc:
+            raise Invalid(path, f"{value[:60]!r}{'...' if len(value) > 60 else ''} is not a usable path "
+                                f"({getattr(exc, 'strerror', None) or exc})") from None
+        if not found:
             raise Invalid(path, f"file not found: {value!r} (looked for {p})")
-        if not p.is_file():
+        if not is_file:
             raise Invalid(path, f"{value!r} is a folder, expected a file")
         return str(p)
 
