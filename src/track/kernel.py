@@ -44,9 +44,9 @@ cost more than the arithmetic. So every sparse loop of the step is one flat loop
 over entries ``w[dst[k]] -= val[k] * x[src[k]]``: the products with K and C
 column by column (the targets within a column are distinct), the forward sweep of
 ``L y = b`` column by column (``y_j`` is final when column j's entries come: all
-its updates come from columns < j) and the backward sweep of ``L^T z = y`` row by
-row from the last (``z_i`` is final when row i's entries come: its updates come
-from rows > i). Measured on the 64-sleeper panel's matrices, old and new loops in one
+its updates come from columns < j) and the backward sweep of ``L^T z = y`` over the
+same entries from the last (``z_j`` is final when column j's entries have come: they
+follow those of every column > j; :func:`ldl_solve`). Measured on the 64-sleeper panel's matrices, old and new loops in one
 script: solve 77 -> 59 us, K product 30 -> 20 us (benchmarks/RESULTS.md, 2026-11-25).
 
 Round-off entries. The Craig–Bampton products ``T^T K T`` leave entries that are
@@ -246,12 +246,13 @@ class LDLFactor:
     ----------
     perm : ndarray of int64, shape (n,)
         ``(P x)[i] = x[perm[i]]``.
-    Ls, Ld, Lx : ndarray, shape (2 nnz,)
-        The strictly lower part of the unit ``L`` as the two flat sweeps of
-        :func:`ldl_solve` read it (module docstring, "Flat loops"): entry ``k`` does
-        ``w[Ld[k]] -= Lx[k] * w[Ls[k]]``. The first ``nnz`` entries are L by columns
-        (source: the column, destination: the row), the last ``nnz`` L by rows from the
-        last row (source: the row, destination: the column).
+    Ls, Ld, Lx : ndarray, shape (nnz,)
+        The strictly lower part of the unit ``L`` by columns (module docstring, "Flat
+        loops"): entry ``k`` is ``L[Ld[k], Ls[k]] = Lx[k]``. The forward sweep of
+        :func:`ldl_solve` does ``w[Ld[k]] -= Lx[k] * w[Ls[k]]`` for k upwards, the
+        backward one ``w[Ls[k]] -= Lx[k] * w[Ld[k]]`` for k downwards: one copy of the
+        factor serves both (until 2026-11-26 a second copy by rows held the backward
+        sweep; it did the same operations in the same order, see :func:`ldl_solve`).
     d : ndarray, shape (n,)
         Diagonal of ``D``.
     """
@@ -269,23 +270,18 @@ class LDLFactor:
             raise RuntimeError("LDL^T of the step matrix: non-positive pivot (matrix not positive definite)")
         Lc = sp.tril(lu.L, -1).tocsc()
         Lc.sort_indices()
-        Lr = Lc.tocsr()
-        Lr.sort_indices()
-        col_of = np.repeat(np.arange(n), np.diff(Lc.indptr))            # forward: by columns
-        row_of = np.repeat(np.arange(n), np.diff(Lr.indptr))            # backward: by rows, last first
-        back = np.argsort(-row_of, kind="stable")
         self.n = n
         self.perm = p.astype(np.int64)
-        self.Ls = np.concatenate([col_of, row_of[back]]).astype(np.int64)
-        self.Ld = np.concatenate([Lc.indices, Lr.indices[back]]).astype(np.int64)
-        self.Lx = np.ascontiguousarray(np.concatenate([Lc.data, Lr.data[back]]), dtype=float)
+        self.Ls = np.repeat(np.arange(n, dtype=np.int64), np.diff(Lc.indptr))   # source: the column
+        self.Ld = Lc.indices.astype(np.int64)                                   # destination: the row
+        self.Lx = np.ascontiguousarray(Lc.data, dtype=float)
         self.d = np.ascontiguousarray(d, dtype=float)
         self.work = np.empty(n)
 
     @property
     def nnz(self) -> int:
         """Stored entries of L (strict lower part) plus the diagonal."""
-        return int(self.Lx.size // 2 + self.n)
+        return int(self.Lx.size + self.n)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """``A^{-1} b`` for b of shape (n,) or (n, k)."""
@@ -329,17 +325,24 @@ def fill_ordering(A: sp.csc_matrix) -> np.ndarray:
 
 @_njit
 def ldl_solve(perm, Ls, Ld, Lx, d, b, x, work):
-    """x = A^{-1} b with ``P A P^T = L D L^T`` (see :class:`LDLFactor`); ``work`` of shape (n,)."""
+    """x = A^{-1} b with ``P A P^T = L D L^T`` (see :class:`LDLFactor`); ``work`` of shape (n,).
+
+    The backward sweep ``L^T z = y`` runs over L's entries by columns from the last
+    entry: ``z_j`` gets its updates from column j's entries ``(i, j)``, ``i > j``, after
+    every entry of the columns ``> j`` (so each ``z_i`` it reads is final), in the order
+    of decreasing ``i`` — the order in which a sweep by rows from the last row gives them,
+    so the result is the same to the last bit as with a second, row-ordered copy of L,
+    which this replaced (2026-11-26: half the factor's memory, 75 -> 63 us at 2763 dofs).
+    """
     n = d.size
-    half = Lx.size // 2
     for i in range(n):
         work[i] = b[perm[i]]
-    for k in range(half):                    # L y = P b, by columns
+    for k in range(Lx.size):                 # L y = P b, by columns
         work[Ld[k]] -= Lx[k] * work[Ls[k]]
     for j in range(n):
         work[j] /= d[j]
-    for k in range(half, Lx.size):           # L^T z = D^-1 y, by rows from the last
-        work[Ld[k]] -= Lx[k] * work[Ls[k]]
+    for k in range(Lx.size - 1, -1, -1):     # L^T z = D^-1 y, by columns from the last entry
+        work[Ls[k]] -= Lx[k] * work[Ld[k]]
     for i in range(n):
         x[perm[i]] = work[i]
 
@@ -353,21 +356,20 @@ def ldl_solve_many(perm, Ls, Ld, Lx, d, B, X, work):
     k = 1 it takes twice :func:`ldl_solve`'s time (125 vs 65 us at n = 2763, measured).
     """
     n, k = B.shape
-    half = Lx.size // 2
     for i in range(n):
         for c in range(k):
             work[i, c] = B[perm[i], c]
-    for p in range(half):                    # L Y = P B, by columns
+    for p in range(Lx.size):                 # L Y = P B, by columns
         s, t, l = Ls[p], Ld[p], Lx[p]
         for c in range(k):
             work[t, c] -= l * work[s, c]
     for j in range(n):
         for c in range(k):
             work[j, c] /= d[j]
-    for p in range(half, Lx.size):           # L^T Z = D^-1 Y, by rows from the last
+    for p in range(Lx.size - 1, -1, -1):     # L^T Z = D^-1 Y, by columns from the last entry
         s, t, l = Ls[p], Ld[p], Lx[p]
         for c in range(k):
-            work[t, c] -= l * work[s, c]
+            work[s, c] -= l * work[t, c]
     for i in range(n):
         for c in range(k):
             X[perm[i], c] = work[i, c]
