@@ -5,7 +5,12 @@
    bogie over the same 0.2 s of passage at 120 km/h with the default 100 us step, in-process
    (the compiled track step). Prints reduced dofs, the loop's wall and us per step, and the
    exponent p of a least-squares fit wall ~ sleepers^p (target p <= 1.1).
-2. Step: the default scenario's first 0.2 s at steps of 25 ... 200 us: wall per simulated
+   The turnout's model grows faster than its sleeper count (behind the crossing the bearers
+   lengthen and carry four rails), so the same fit is also made against the reduced dofs.
+2. Plain track (scenarios/plain_track.yaml) of 20 ... 160 sleepers, the same passage and step:
+   every sleeper bay adds the same bodies, so wall ~ sleepers^p measures the step's own
+   growth with the model's size, apart from how the turnout's layout grows.
+3. Step: the default scenario's first 0.2 s at steps of 25 ... 200 us: wall per simulated
    second and us per step (the per-step cost should not depend on h; the count does).
 
 Every case is run twice and the faster kept (numba compilation and the body cache warm up
@@ -24,15 +29,16 @@ from orchestrator.inputs.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT / "scenarios" / "crossing_1_12_through_120.yaml"
+PLAIN = ROOT / "scenarios" / "plain_track.yaml"
 SLEEPERS = (20, 40, 80, 160)
 STEPS = (25e-6, 50e-6, 100e-6, 200e-6)
 DURATION = 0.2        # s of passage in every case
 REPEAT = 2
 
 
-def _loop_wall(overrides: list[str]) -> tuple[float, int, int]:
-    """(best loop wall [s], steps, reduced dofs) of the in-process run with ``overrides``."""
-    sc = load_scenario(DEFAULT, overrides=overrides)
+def _loop_wall(overrides: list[str], scenario: Path = DEFAULT) -> tuple[float, int, int]:
+    """(best loop wall [s], steps, reduced dofs) of the in-process run of ``scenario`` with ``overrides``."""
+    sc = load_scenario(scenario, overrides=overrides)
     best, steps, dofs = np.inf, 0, 0
     for _ in range(REPEAT):
         res = run_cosim(sc, backend="inprocess", record_states=False)
@@ -59,6 +65,19 @@ def sleepers_study() -> float:
     return p
 
 
+def plain_study() -> float:
+    print(f"plain track\n{'sleepers':>8} {'dofs':>6} {'steps':>6} {'loop [s]':>9} {'us/step':>8}")
+    walls = []
+    for n in SLEEPERS:
+        wall, steps, dofs = _loop_wall([f"track.layout.sleepers={n}", "simulation.step=1e-4",
+                                        f"simulation.duration={DURATION}"], PLAIN)
+        walls.append(wall)
+        print(f"{n:8d} {dofs:6d} {steps:6d} {wall:9.3f} {1e6 * wall / steps:8.1f}")
+    p = np.polyfit(np.log(SLEEPERS), np.log(walls), 1)[0]
+    print(f"fitted exponent, plain track: wall ~ sleepers^{p:.2f} (target <= 1.1)")
+    return p
+
+
 def step_study() -> None:
     print(f"{'step [us]':>9} {'steps':>6} {'loop [s]':>9} {'us/step':>8} {'wall per sim. s':>16}")
     for h in STEPS:
@@ -70,4 +89,5 @@ def step_study() -> None:
 if __name__ == "__main__":
     print(f"bench_scaling: {time.strftime('%Y-%m-%d %H:%M')}, {platform.node()}, {platform.processor() or platform.machine()}")
     sleepers_study()
+    plain_study()
     step_study()

@@ -311,13 +311,15 @@ def test_diagnosis_round_trips_through_json():
         Gain(0.85, {"A1": 0.8}),
         [Passage("p2.h5", 27.78, 0.39, 0.07, 1 - 0.07 / 0.39, {"A1": {"nrmse_before": 0.3, "nrmse_after": 0.05}})],
         [{"variant": "ballast_void@21 at 0.0035", "stage": "screening", "reason": "the run stopped early: x"}],
-        120, 300.5, {"delta_bic": 10.0, "confirm": 4, "fit": 2, "sensor_reach": 1, "candidates": ["ballast_void@21"]})
+        120, 300.5, {"delta_bic": 10.0, "confirm": 4, "fit": 2, "sensor_reach": 1, "candidates": ["ballast_void@21"]},
+        {"runs": 15, "used": 12})
 
     data = json.loads(json.dumps(diagnosis.to_json()))
     assert Diagnosis.from_json(data) == diagnosis
     assert Diagnosis.from_json(data).to_json() == data
     assert list(data) == ["scenario", "measured", "answer", "baseline", "nuisance", "causes", "named_cause",
-                          "extended_scenario", "gain", "validation", "dropped", "runs", "wall_seconds", "settings"]
+                          "extended_scenario", "gain", "validation", "dropped", "runs", "wall_seconds", "settings",
+                          "runs_ahead"]
     assert list(data["answer"]) == ["kind", "causes", "reason", "where"]
     assert list(data["named_cause"]) == ["cause", "sleeper", "parameters", "objective", "gain", "evidence",
                                          "ambiguity", "uncertainty"]
@@ -326,9 +328,10 @@ def test_diagnosis_round_trips_through_json():
                                             "threshold": 10.0, "reason": "noise"})
     assert CauseFit.from_json(none.to_json()) == none and "sleeper" not in none.to_json()
 
-    old = {k: v for k, v in data.items() if k not in ("answer", "nuisance", "dropped")}   # the first schema
+    old = {k: v for k, v in data.items() if k not in ("answer", "nuisance", "dropped", "runs_ahead")}   # first schema
     read = Diagnosis.from_json(old)
     assert read.answer.kind == "named" and read.answer.causes == [named] and read.dropped == []
+    assert read.runs_ahead == {}
     old["named_cause"] = none.to_json()
     assert Diagnosis.from_json(old).answer.kind == "none"
 

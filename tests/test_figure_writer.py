@@ -30,8 +30,10 @@ def test_figures_are_written_and_failures_reported(tmp_path, layout, background)
     naming it (FileNotFoundError), and close() returns normally."""
     w = FigureWriter(background=background)
     assert w.background is background
-    w.submit("signals", run_figures.signals, tmp_path, "test", layout, _signals())
-    w.submit("broken", run_figures.signals, tmp_path / "missing" / "folder", "test", layout, _signals())
+    w.submit("layout", run_figures.layout, tmp_path, layout)
+    w.submit("contact_forces", run_figures.contact_forces, tmp_path, "test", _signals())
+    w.submit("broken", run_figures.contact_forces, tmp_path / "missing" / "folder", "test", _signals())
+    w.submit("displacements", run_figures.displacements, tmp_path, "test", _signals())
     failed = w.close()
     assert sorted(p.name for p in tmp_path.glob("*.png")) == ["contact_forces.png", "displacements.png", "layout.png"]
     assert len(failed) == 1 and failed[0].startswith("broken: ") and "No such file" in failed[0], failed

@@ -58,3 +58,36 @@ def test_points_are_never_evaluated_twice():
     fit = fit_unit_cube(batch, [0.0, 0.0], max_nfev=15)
     assert set(calls.values()) == {1} and len(calls) == fit.evaluations
     assert fit.p == pytest.approx([np.arcsin(0.5) / 3, 0.7], abs=1e-5)
+
+
+def test_runs_ahead_change_nothing_but_the_rounds():
+    """Consistency check (two paths of ours): a one-parameter fit with a spare worker runs each trial
+    point's Jacobian point beside it (fitting module doc, "Runs ahead"); it must visit the same points
+    in the same order and return the same numbers as without, in fewer rounds, never running a point
+    twice. Exact equality: the same residual function at the same points (no tolerance needed)."""
+    def residual(p):   # from 0.9, trf rejects its second trial (0.226): a Jacobian point run for nothing
+        return np.array([np.tanh(10.0 * (p[0] - 0.63)), 0.3 * (p[0] - 0.6) ** 2, 0.05])
+
+    def fitted(spare):
+        rounds, ran, kept = [], [], {}
+
+        def batch(ps, ahead=()):       # as CauseFitter: a point run ahead is served without a new run
+            fresh = [p for p in ps if p.tobytes() not in kept] + list(ahead)
+            rounds.append(len(fresh))
+            for p in fresh:
+                ran.append(p.tobytes())
+                kept[p.tobytes()] = residual(p)
+            return [kept[p.tobytes()] for p in ps]
+
+        fit = fit_unit_cube(batch, [0.9], max_nfev=12, spare=spare)
+        return fit, [r for r in rounds if r], ran
+
+    plain, rounds0, ran0 = fitted(0)
+    ahead, rounds1, ran1 = fitted(1)
+    assert ahead.p.tobytes() == plain.p.tobytes() and ahead.cost == plain.cost
+    assert ahead.history == plain.history and ahead.evaluations == plain.evaluations
+    assert len(set(ran1)) == len(ran1)                       # never run twice
+    assert set(ran0) < set(ran1)                             # every point the fit asked for ran, and more
+    assert 2 in rounds1                                       # trial and its Jacobian point went out together
+    assert len(rounds1) < len(rounds0)                        # in fewer rounds
+    assert abs(ahead.p[0] - 0.63) < 1e-3                      # and the fit still converges (tanh zero at 0.63)

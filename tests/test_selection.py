@@ -27,14 +27,14 @@ def _signals(u: np.ndarray) -> np.ndarray:
 class _ClosedForm(CauseFitter):
     """A :class:`CauseFitter` whose runs are :func:`_signals` against the truth's (no pool, no target)."""
 
-    def runs(self, us):
+    def runs(self, us, ahead=()):   # no pool: nothing runs ahead (spare 0)
         for u in us:
             if u.tobytes() not in self.cache:
                 r = _signals(u) - _signals(TRUTH)
                 self.cache[u.tobytes()] = SimpleNamespace(chi2=float(r @ r), r=r)
         return [self.cache[u.tobytes()] for u in us]
 
-    def residuals(self, us):
+    def residuals(self, us, ahead=()):
         return [cm.r for cm in self.runs(us)]
 
 
@@ -82,3 +82,41 @@ def test_a_void_fit_that_moves_from_its_first_start_is_not_restarted():
     alone = fit_unit_cube(batch, np.array([0.3, 0.6]), max_nfev=FIT_MAX_NFEV)
     assert alone.cost < alone.cost_start
     assert len(fitter.cache) == alone.evaluations + 2
+
+
+def test_a_point_run_ahead_waits_until_asked_for(monkeypatch):
+    """CauseFitter.runs with points ``ahead`` (fitting module doc, "Runs ahead"): they run in the same pool
+    round but enter the fitter's cache (which :meth:`best` reads) and the dropped list only when a later
+    call asks for them, then without a second run. A stand-in cause, pool and comparison (no simulation)."""
+    from orchestrator.inverse import selection
+
+    kind = SimpleNamespace(names=("scale",), from_unit=lambda u: np.asarray(u, float),
+                           apply=lambda raw, sleeper, v: {"v": float(v[0])})
+    monkeypatch.setattr(selection, "kind_of", lambda c: kind)
+    # a run at v > 0.9 "diverges": checked_comparison gives no comparison and its reason
+    monkeypatch.setattr(selection, "checked_comparison",
+                        lambda target, run, ref: (None, "diverged") if run > 0.9 else (SimpleNamespace(chi2=run), None))
+
+    class Pool:
+        spare, ahead_runs, ahead_used, dropped, rounds = 1, 0, 0, [], []
+
+        def map(self, raws):
+            self.rounds.append(len(raws))
+            return [r["v"] for r in raws]
+
+        def drop(self, variant, stage, reason):
+            self.dropped.append(reason)
+
+    pool = Pool()
+    start = Evaluated(SimpleNamespace(label="stand-in", sleeper=None), np.array([0.5]), SimpleNamespace(chi2=0.5),
+                      1, "confirmed")
+    fitter = CauseFitter(pool=pool, target=None, raw={}, start=start, reference=None)
+    u1, u2, u3 = np.array([0.3]), np.array([0.95]), np.array([0.2])
+    assert fitter.runs([u1], ahead=[u2, u3])[0].chi2 == 0.3
+    assert pool.rounds == [3] and pool.ahead_runs == 2
+    assert list(fitter.cache) == [u1.tobytes()] and pool.dropped == []     # u3 (chi2 0.2) is not yet best
+    assert np.array_equal(fitter.best(), u1)
+    assert fitter.runs([u2, u1]) == [None, fitter.cache[u1.tobytes()]]
+    assert pool.rounds == [3] and pool.ahead_used == 1 and pool.dropped == ["diverged"]   # no second run
+    fitter.runs([u3])
+    assert pool.rounds == [3] and pool.ahead_used == 2 and np.array_equal(fitter.best(), u3)

@@ -569,13 +569,14 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
     """
     from tqdm import tqdm
 
-    from orchestrator.sweeps.executors import make_executor
+    from orchestrator.sweeps.executors import executor_slots, make_executor
 
     t_start = time.perf_counter()
     inp = _read_inputs(scenario_path, measured_path, out_dir, validate)
     executor = make_executor(workers, scheduler)
     bar = tqdm(total=1, desc="diagnose", unit="run", disable=not progress)
-    pool = Pool(executor, str(scenario_path), bar=bar)
+    # the workers beyond the first run a small fit's Jacobian ahead of its trial point (Pool.spare)
+    pool = Pool(executor, str(scenario_path), bar=bar, spare=executor_slots(executor) - 1)
     try:
         base, baseline = _baseline(pool, inp)
         ref_raw, ref, nuisance = _nuisance(pool, inp, base)
@@ -592,7 +593,8 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
 
     result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance, causes, legacy,
                        ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
-                       time.perf_counter() - t_start, _settings(inp.cands))
+                       time.perf_counter() - t_start, _settings(inp.cands),
+                       {"runs": pool.ahead_runs, "used": pool.ahead_used})
     _write_outputs(result, inp, base.cmp, final)
     return result
 

@@ -20,7 +20,7 @@ JSON file (NumPy scalars to numbers) is the caller's business.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass
@@ -275,6 +275,11 @@ class Diagnosis:
         Wall time of the diagnosis [s].
     settings : dict
         The thresholds used and the candidates' labels.
+    runs_ahead : dict
+        ``{"runs", "used"}``: of :attr:`runs`, those made ahead of being asked for (a
+        one-parameter fit's Jacobian beside its trial point, on a worker that would idle:
+        :func:`orchestrator.inverse.fitting.fit_unit_cube`) and how many a fit then used;
+        the others changed nothing but the count. ``{}`` in files written before 2026-11-26.
     """
 
     scenario: str
@@ -291,6 +296,7 @@ class Diagnosis:
     runs: int
     wall_seconds: float
     settings: dict
+    runs_ahead: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         """The content of ``diagnosis.json``: the attributes in their order, each part by its own ``to_json``."""
@@ -299,7 +305,7 @@ class Diagnosis:
                 "causes": [c.to_json() for c in self.causes], "named_cause": self.named_cause.to_json(),
                 "extended_scenario": self.extended_scenario, "gain": self.gain.to_json(),
                 "validation": [v.to_json() for v in self.validation], "dropped": self.dropped, "runs": self.runs,
-                "wall_seconds": self.wall_seconds, "settings": self.settings}
+                "wall_seconds": self.wall_seconds, "settings": self.settings, "runs_ahead": self.runs_ahead}
 
     @classmethod
     def from_json(cls, data: dict) -> Diagnosis:
@@ -309,7 +315,7 @@ class Diagnosis:
                    data.get("nuisance"), [CauseFit.from_json(c) for c in data["causes"]],
                    CauseFit.from_json(data["named_cause"]), data["extended_scenario"], Gain.from_json(data["gain"]),
                    [Passage.from_json(v) for v in data["validation"]], data.get("dropped", []), data["runs"],
-                   data["wall_seconds"], data["settings"])
+                   data["wall_seconds"], data["settings"], data.get("runs_ahead", {}))
 
 
 __all__ = ["Diagnosis", "Answer", "CauseFit", "Baseline", "Gain", "Passage"]

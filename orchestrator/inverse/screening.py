@@ -88,6 +88,13 @@ class Pool:
         Progress bar, advanced by one per run.
     dropped : list of dict
         Variants left out, each ``{"variant", "stage", "reason"}`` (:func:`checked_comparison`).
+    spare : int
+        Runs a batch of one can add at no extra wall time: the workers beyond the first
+        (:func:`orchestrator.sweeps.executors.executor_slots` - 1). A fit of at most this many
+        parameters runs its trial point's Jacobian ahead on them
+        (:func:`orchestrator.inverse.fitting.fit_unit_cube`).
+    ahead_runs, ahead_used : int
+        Runs made ahead of being asked for, and those of them a fit then asked for.
     """
 
     executor: object
@@ -96,6 +103,9 @@ class Pool:
     wall: float = 0.0
     bar: object = None
     dropped: list = field(default_factory=list)
+    spare: int = 0
+    ahead_runs: int = 0
+    ahead_used: int = 0
 
     def drop(self, variant: str, stage: str, reason: str) -> None:
         """Record (and log) a variant left out of the diagnosis and why."""

@@ -28,6 +28,7 @@ trust region steps away from it.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -74,6 +75,10 @@ class CauseFitter:
         The reference model's comparison (what a failed point's residual is scaled from).
     cache : dict
         Unit-cube point (bytes) -> Comparison, or None for a failed run.
+    ahead : dict
+        Points run ahead of being asked for (:func:`orchestrator.inverse.fitting.fit_unit_cube`,
+        "Runs ahead"): bytes -> (Comparison or None, why). A point moves to :attr:`cache`
+        when :meth:`runs` is asked for it, so :meth:`best` sees only the points the fit visited.
     """
 
     pool: Pool
@@ -82,24 +87,42 @@ class CauseFitter:
     start: Evaluated
     reference: Comparison
     cache: dict = field(default_factory=dict)
+    ahead: dict = field(default_factory=dict)
 
-    def runs(self, us: list[np.ndarray]) -> list[Comparison | None]:
-        """The comparisons of the points ``us`` (full parameter vectors in the unit cube)."""
+    def runs(self, us: list[np.ndarray], ahead: Sequence[np.ndarray] = ()) -> list[Comparison | None]:
+        """The comparisons of the points ``us`` (full parameter vectors in the unit cube); the points
+        ``ahead`` run in the same round and wait in :attr:`ahead` until asked for."""
         c, kind = self.start.candidate, kind_of(self.start.candidate)
-        todo = list({u.tobytes(): u for u in us if u.tobytes() not in self.cache}.values())
+        asked = {u.tobytes(): u for u in us if u.tobytes() not in self.cache}
+        fresh = [u for b, u in asked.items() if b not in self.ahead]
+        extra = {u.tobytes(): u for u in ahead
+                 if u.tobytes() not in self.cache and u.tobytes() not in self.ahead and u.tobytes() not in asked}
+        todo = fresh + list(extra.values())
+        got = {}
         if todo:
             out = self.pool.map([kind.apply(self.raw, c.sleeper, kind.from_unit(u)) for u in todo])
-            for u, run in zip(todo, out):
-                cmp, why = checked_comparison(self.target, run, self.reference)
-                if cmp is None:
-                    self.pool.drop(f"{c.label} at {np.round(kind.from_unit(u), 6).tolist()}", "fit", why)
-                self.cache[u.tobytes()] = cmp
+            self.pool.ahead_runs += len(extra)
+            got = {u.tobytes(): checked_comparison(self.target, run, self.reference) for u, run in zip(todo, out)}
+        for b, u in asked.items():   # in the order asked, whether run now or ahead
+            if b in self.ahead:
+                self.pool.ahead_used += 1
+            self._keep(u, *(self.ahead.pop(b) if b in self.ahead else got[b]))
+        for b in extra:
+            self.ahead[b] = got[b]
         return [self.cache[u.tobytes()] for u in us]
 
-    def residuals(self, us: list[np.ndarray]) -> list[np.ndarray]:
-        """Weighted residuals of the points (a failed point: :data:`PENALTY` x the reference's)."""
+    def _keep(self, u: np.ndarray, cmp: Comparison | None, why: str | None) -> None:
+        """Enter an evaluated point in :attr:`cache` (a failed run: dropped with its reason)."""
+        if cmp is None:
+            kind = kind_of(self.start.candidate)
+            self.pool.drop(f"{self.start.candidate.label} at {np.round(kind.from_unit(u), 6).tolist()}", "fit", why)
+        self.cache[u.tobytes()] = cmp
+
+    def residuals(self, us: list[np.ndarray], ahead: Sequence[np.ndarray] = ()) -> list[np.ndarray]:
+        """Weighted residuals of the points (a failed point: :data:`PENALTY` x the reference's); ``ahead``
+        as in :meth:`runs`."""
         return [self.target.weighted_residuals(cm) if cm is not None
-                else PENALTY * self.target.weighted_residuals(self.reference) for cm in self.runs(us)]
+                else PENALTY * self.target.weighted_residuals(self.reference) for cm in self.runs(us, ahead)]
 
     def best(self) -> np.ndarray:
         """The cached point of least chi-square."""
@@ -115,11 +138,13 @@ class CauseFitter:
         for n, to_u in cause_stages(kind)[stages]:
             k = n
 
-            def batch(ps, to_u=to_u):
-                return self.residuals([np.clip(to_u(p), 0.0, 1.0) for p in ps])
+            def batch(ps, ahead=(), to_u=to_u):
+                return self.residuals([np.clip(to_u(p), 0.0, 1.0) for p in ps],
+                                      [np.clip(to_u(q), 0.0, 1.0) for q in ahead])
 
+            spare = self.pool.spare if self.pool is not None else 0
             for p0 in (self._wedge_starts(u_best, to_u) if n == 2 else [u_best]):
-                fit = fit_unit_cube(batch, p0, max_nfev=max_nfev)
+                fit = fit_unit_cube(batch, p0, max_nfev=max_nfev, spare=spare)
                 if fit.cost < fit.cost_start:   # the fit left its start: no restart
                     break
             if any(cm is not None for cm in self.cache.values()):

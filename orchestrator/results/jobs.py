@@ -74,13 +74,14 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     with FigureWriter() as figures:   # first: its process imports matplotlib while the co-simulation runs
         out_dir = prepare_out_dir(out_dir)   # warns when it held an earlier run's results
         model = track_model(scenario.track)   # the model the run builds (its bodies cached) for the post-processing
+        figures.submit("layout.png", run_figures.layout, out_dir, model.layout)   # drawn during the co-simulation
         compiled = _compiled_sensors(scenario, model)
         columns = None if save_states else merge_columns(analysis_columns(model), sensor_columns(model, compiled))
         res = _cosimulate(scenario, out_dir, progress, backend, columns)
         t_post = time.perf_counter()
         sig = run_figures.plotted_signals(res)   # drawn while the main process post-processes
-        figures.submit("layout.png, contact_forces.png, displacements.png", run_figures.signals, out_dir,
-                       scenario.name, model.layout, sig)
+        figures.submit("contact_forces.png", run_figures.contact_forces, out_dir, scenario.name, sig)
+        figures.submit("displacements.png", run_figures.displacements, out_dir, scenario.name, sig)
         summary, sensors, an, geometry = _post_process(scenario, backend, model, compiled, res)
         states = _states_to_save(res.track_record) if save_states else None
         res.track_record = None  # post-processed: what is not asked for is not kept

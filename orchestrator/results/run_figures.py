@@ -70,13 +70,21 @@ def contact_path(out_dir: Path, lay, res, geometry: dict) -> None:
     plots.save(fig, out_dir / "contact_path.png")
 
 
-def signals(out_dir: Path, name: str, lay, res) -> None:
-    """layout.png, contact_forces.png and displacements.png (wheels and the rail under them)."""
-    wheels = range(res.Fz.shape[1])
+def layout(out_dir: Path, lay) -> None:
+    """layout.png: the track layout (needs nothing from the co-simulation: drawn during it)."""
     plots.save(plot_layout(lay), out_dir / "layout.png")
-    plots.save(plots.plot_time_series(res.t, {f"wheel {i + 1}": 1e-3 * res.Fz[:, i] for i in wheels},
+
+
+def contact_forces(out_dir: Path, name: str, res) -> None:
+    """contact_forces.png: each wheel's contact force over time."""
+    plots.save(plots.plot_time_series(res.t, {f"wheel {i + 1}": 1e-3 * res.Fz[:, i] for i in range(res.Fz.shape[1])},
                                       "contact force [kN]", f"{name}: wheel-rail contact forces"),
                out_dir / "contact_forces.png")
+
+
+def displacements(out_dir: Path, name: str, res) -> None:
+    """displacements.png: each wheel's and the rail's under it vertical displacement over time."""
+    wheels = range(res.Fz.shape[1])
     series = {f"wheel {i + 1}": 1e3 * res.z[:, i] for i in wheels}
     series.update({f"rail under wheel {i + 1}": 1e3 * res.rail_z[:, i] for i in wheels})
     plots.save(plots.plot_time_series(res.t, series, "vertical displacement [mm]",

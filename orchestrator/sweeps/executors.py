@@ -37,7 +37,7 @@ from orchestrator.sweeps.workers import (
     worker_threads,
 )
 
-__all__ = ["DaskExecutor", "make_executor", "check_workers", "lost_worker", "default_workers",
+__all__ = ["DaskExecutor", "executor_slots", "make_executor", "check_workers", "lost_worker", "default_workers",
            "worker_threads", "setup_worker", "limit_threads", "die_with_parent"]
 
 START_METHOD = "spawn"  # fork with numpy/BLAS threads may deadlock a worker
@@ -85,6 +85,11 @@ class DaskExecutor(cf.Executor):
         # pure=False: every submit is a task of its own (no key deduplication by Dask).
         self._executor = self._client.get_executor(pure=False)
 
+    @property
+    def slots(self) -> int:
+        """Tasks the cluster runs at once now: its workers' threads (at least 1)."""
+        return max(1, sum(self._client.nthreads().values()))
+
     def submit(self, fn, /, *args, **kwargs) -> cf.Future:
         return self._executor.submit(fn, *args, **kwargs)
 
@@ -93,6 +98,13 @@ class DaskExecutor(cf.Executor):
             self._executor.shutdown(wait=wait and not cancel_futures)
         finally:
             self._client.close()
+
+
+def executor_slots(executor: cf.Executor) -> int:
+    """Runs ``executor`` takes at once: a local pool's processes, a cluster's worker threads; 1 if unknown."""
+    if isinstance(executor, DaskExecutor):
+        return executor.slots
+    return max(1, int(getattr(executor, "_max_workers", 1) or 1))
 
 
 def make_executor(workers: int | None, scheduler: str | None, *, connect_timeout: str = DASK_CONNECT_TIMEOUT,
