@@ -100,9 +100,9 @@ def test_a_point_run_ahead_waits_until_asked_for(monkeypatch):
     class Pool:
         spare, ahead_runs, ahead_used, dropped, rounds = 1, 0, 0, [], []
 
-        def map(self, raws):
+        def map(self, raws, then=None):
             self.rounds.append(len(raws))
-            return [r["v"] for r in raws]
+            return [r["v"] if then is None else then(r["v"]) for r in raws]
 
         def drop(self, variant, stage, reason):
             self.dropped.append(reason)

@@ -513,15 +513,16 @@ def _settings(cands: list[Candidate]) -> dict:
             "candidates": [c.label for c in cands]}
 
 
-def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: Comparison) -> None:
+def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: Comparison, executor=None) -> None:
     """Write ``diagnosis.json`` and the report (``report.md`` and its plots) into the output folder.
 
-    Input: the diagnosis, the inputs, the nominal and the extended model's comparisons.
+    Input: the diagnosis, the inputs, the nominal and the extended model's comparisons, and the
+    executor whose (by then idle) workers draw the plots.
     """
     from orchestrator.inverse.diagnose_report import write_report
 
     (inp.out_dir / "diagnosis.json").write_text(json.dumps(result.to_json(), indent=1, default=numpy_default))
-    write_report(inp.out_dir, result, inp.target, before, after, inp.layout)
+    write_report(inp.out_dir, result, inp.target, before, after, inp.layout, executor)
 
 
 def _result(inp: _Inputs, base: Evaluated, ref: Evaluated, ref_raw: dict, named: list, rounds: list,
@@ -587,15 +588,14 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
         validation = _validate(pool, inp, ext_raw)
         # inside the pool's lifetime: a named cause's intervals may need Jacobian runs not yet done
         answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence, step_err)
+        result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance, causes, legacy,
+                           ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
+                           time.perf_counter() - t_start, _settings(inp.cands),
+                           {"runs": pool.ahead_runs, "used": pool.ahead_used})
+        _write_outputs(result, inp, base.cmp, final, executor)   # the workers draw the report's plots
     finally:
         bar.close()
         executor.shutdown(wait=True, cancel_futures=True)
-
-    result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance, causes, legacy,
-                       ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
-                       time.perf_counter() - t_start, _settings(inp.cands),
-                       {"runs": pool.ahead_runs, "used": pool.ahead_used})
-    _write_outputs(result, inp, base.cmp, final)
     return result
 
 

@@ -4,15 +4,22 @@ It reads the typed result, :class:`orchestrator.inverse.diagnosis.Diagnosis`, an
 with the verdict and its evidence in plain words (:func:`_verdict_lines`), then the
 residual before/after per channel, the nuisance estimates, the named causes' intervals,
 the candidates, the validation passages and the variants left out.
+
+The plots are the report's slowest part (~0.5 s each, 3.5 s for the default layout's seven,
+after the runs, with every worker idle): given the diagnosis's executor, :func:`write_report`
+has its workers draw them, each handed only its channels' arrays, and writes the PNG bytes
+they return (so a cluster's workers need no access to the output folder).
 """
 from __future__ import annotations
 
+import concurrent.futures as cf
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from orchestrator.inverse.diagnosis import Diagnosis
-from orchestrator.results.plots import _plt, save
+from orchestrator.results.plots import _plt, png_bytes
 
 UNITS = {"pressure": ("kPa", 1e-3), "displacement": ("mm", 1e3), "acceleration": ("m/s²", 1.0),
          "strain": ("µε", 1e6)}
@@ -66,18 +73,59 @@ def _fmt(v) -> str:
     return str(v)
 
 
-def write_report(out_dir: Path, result: Diagnosis, target, before, after, layout) -> Path:
+def draw_png(plot, *args) -> bytes:
+    """``plot(*args)`` as PNG bytes (what a worker of :func:`write_report` runs)."""
+    return png_bytes(plot(*args))
+
+
+def _channels_of(target, before, after, layout, ids: list) -> tuple:
+    """The arguments of :func:`plot_overlays` cut down to the channels ``ids`` (what a worker needs of them)."""
+    def cmp(c):
+        return SimpleNamespace(simulated={k: c.simulated[k] for k in ids}, channels={k: c.channels[k] for k in ids})
+
+    b = cmp(before)
+    return (SimpleNamespace(measured=SimpleNamespace(t=target.measured.t,
+                                                     channels={k: target.measured.channels[k] for k in ids})),
+            b, b if after is before else cmp(after),
+            SimpleNamespace(ids=list(ids), groups={k: layout.groups[k] for k in ids},
+                            types={k: layout.types[k] for k in ids}))
+
+
+def _figures(target, before, after, layout) -> list[tuple[str, object, tuple]]:
+    """(file name, plot function, its arguments) of the report's plots."""
+    groups = sorted({layout.groups[k] for k in before.channels})
+    out = []
+    for g in groups:
+        ids = [k for k in layout.ids if layout.groups[k] == g and k in before.channels]
+        out.append((f"overlay_{g}.png", plot_overlays, (*_channels_of(target, before, after, layout, ids), g)))
+    bars = [SimpleNamespace(channels={k: {"nrmse": c.channels[k]["nrmse"]} for k in before.channels})
+            for c in (before, after)]
+    return out + [("residuals.png", plot_residual_bars, tuple(bars))]
+
+
+def _draw_all(out_dir: Path, figures: list, executor) -> None:
+    """Write every figure: drawn by ``executor``'s workers when given (here if it cannot take them)."""
+    futures = None
+    if executor is not None:
+        try:
+            futures = [executor.submit(draw_png, plot, *args) for _, plot, args in figures]
+        except (cf.BrokenExecutor, RuntimeError):   # shut down or broken: draw here
+            futures = None
+    for i, (name, plot, args) in enumerate(figures):
+        (out_dir / name).write_bytes(futures[i].result() if futures is not None else draw_png(plot, *args))
+
+
+def write_report(out_dir: Path, result: Diagnosis, target, before, after, layout, executor=None) -> Path:
     """Write the plots and ``report.md`` into ``out_dir``; returns the report's path.
 
     ``result`` is the diagnosis; ``target`` the measured passage
     (:class:`orchestrator.inverse.objective.Target`); ``before`` and ``after`` the nominal
-    and the extended model's comparisons with it; ``layout`` the sensor layout.
+    and the extended model's comparisons with it; ``layout`` the sensor layout;
+    ``executor`` (optional) draws the plots on its workers (module doc).
     """
     out_dir = Path(out_dir)
     groups = sorted({layout.groups[k] for k in before.channels})
-    for g in groups:
-        save(plot_overlays(target, before, after, layout, g), out_dir / f"overlay_{g}.png")
-    save(plot_residual_bars(before, after), out_dir / "residuals.png")
+    _draw_all(out_dir, _figures(target, before, after, layout), executor)
     lines = (_verdict_lines(result) + _baseline_lines(result, before, after) + _nuisance_lines(result)
              + _interval_lines(result) + _cause_lines(result) + _dropped_lines(result))
     if result.validation:

@@ -100,9 +100,10 @@ class CauseFitter:
         todo = fresh + list(extra.values())
         got = {}
         if todo:
-            out = self.pool.map([kind.apply(self.raw, c.sleeper, kind.from_unit(u)) for u in todo])
+            out = self.pool.map([kind.apply(self.raw, c.sleeper, kind.from_unit(u)) for u in todo],
+                                then=lambda run: checked_comparison(self.target, run, self.reference))
             self.pool.ahead_runs += len(extra)
-            got = {u.tobytes(): checked_comparison(self.target, run, self.reference) for u, run in zip(todo, out)}
+            got = {u.tobytes(): cw for u, cw in zip(todo, out)}
         for b, u in asked.items():   # in the order asked, whether run now or ahead
             if b in self.ahead:
                 self.pool.ahead_used += 1
@@ -228,10 +229,10 @@ def _axes(kind, raw: dict, sleeper) -> list[tuple[np.ndarray | None, np.ndarray,
 def _screen(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, axes: dict) -> dict:
     """Step 2, runs: candidate -> per proxy, magnitude -> signals on the measured base (failed variants left out)."""
     jobs = [(c, i, x) for c in cands for i, (_, xs, x0) in enumerate(axes[c]) for x in xs if abs(x - x0) > 1e-12]
-    runs = pool.map([kind_of(c).apply_scalar(raw, c.sleeper, x, axes[c][i][0]) for c, i, x in jobs])
+    got = pool.map([kind_of(c).apply_scalar(raw, c.sleeper, x, axes[c][i][0]) for c, i, x in jobs],
+                   then=lambda run: checked_comparison(target, run, ref.cmp))
     screened = {c: [{x0: ref.cmp.simulated} for _, _, x0 in axes[c]] for c in cands}
-    for (c, i, x), run in zip(jobs, runs):
-        cmp, why = checked_comparison(target, run, ref.cmp)
+    for (c, i, x), (cmp, why) in zip(jobs, got):
         if cmp is None:
             pool.drop(f"{c.label} at {x:.6g}" + ("" if i == 0 else f" (screening shape {i})"), "screening", why)
         else:
@@ -259,10 +260,10 @@ def _confirm(pool: Pool, target: Target, raw: dict, ref: Evaluated, dense: dict,
     """Step 3: the ``confirm`` best screened candidates re-run at their best magnitude."""
     top = sorted(dense, key=lambda c: dense[c].cmp.chi2)[:confirm]
     pool.expect(len(top))
-    runs = pool.map([kind_of(c).apply(raw, c.sleeper, dense[c].values) for c in top])
+    got = pool.map([kind_of(c).apply(raw, c.sleeper, dense[c].values) for c in top],
+                   then=lambda run: checked_comparison(target, run, ref.cmp))
     out = {}
-    for c, run in zip(top, runs):
-        cmp, why = checked_comparison(target, run, ref.cmp)
+    for c, (cmp, why) in zip(top, got):
         if cmp is None:
             pool.drop(f"{c.label} at {np.round(dense[c].values, 6).tolist()}", "confirmation", why)
         else:

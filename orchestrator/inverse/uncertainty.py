@@ -197,8 +197,8 @@ def nuisance_jacobian(fitter, values: np.ndarray) -> tuple[np.ndarray, np.ndarra
         names.append(name)
     fitter.pool.expect(len(raws))
     cols = []
-    for run in fitter.pool.map(raws) if raws else []:
-        cmp, _ = checked_comparison(fitter.target, run, fitter.reference)
+    for cmp, _ in fitter.pool.map(raws, then=lambda run: checked_comparison(fitter.target, run, fitter.reference)) \
+            if raws else []:
         if cmp is not None:
             cols.append(fitter.target.weighted_residuals(cmp) - r0)
     jn = np.column_stack(cols) if cols else np.zeros((r0.size, 0))

@@ -235,7 +235,20 @@ PNG_COMPRESS_LEVEL = 3
 
 def save(fig, path) -> None:
     """Write a figure (PNG at 110 dpi, or the format of ``path``'s suffix) and release it."""
+    _write(fig, path, png=str(path).lower().endswith(".png"))
+
+
+def png_bytes(fig) -> bytes:
+    """The PNG :func:`save` would write, as bytes (drawn in one process, written by another); releases the figure."""
+    import io
+    buf = io.BytesIO()
+    _write(fig, buf, png=True, format="png")
+    return buf.getvalue()
+
+
+def _write(fig, target, png: bool, **kwargs) -> None:
     import matplotlib.pyplot as plt
-    png = str(path).lower().endswith(".png")   # only the PNG writer takes Pillow's options
-    fig.savefig(path, dpi=110, **({"pil_kwargs": {"compress_level": PNG_COMPRESS_LEVEL}} if png else {}))
+    if png:   # only the PNG writer takes Pillow's options
+        kwargs["pil_kwargs"] = {"compress_level": PNG_COMPRESS_LEVEL}
+    fig.savefig(target, dpi=110, **kwargs)
     plt.close(fig)
