@@ -4,7 +4,8 @@ Store (everything under ``OUT``)::
 
     OUT/runs/<run_id>/result.json   the run is finished iff this file exists
     OUT/runs/<run_id>/...           whatever the run function writes (arrays, ...)
-    OUT/sweep.csv                   one row per finished run, in grid order
+    OUT/sweep.csv                   one row per finished run, in grid order (rewritten every few
+                                    seconds while a sweep runs, and at its end)
     OUT/sweep_<scalar>.png          each returned scalar against the first varied key
                                     (:func:`orchestrator.sweeps.sweep.plot_sweep`)
 
