@@ -515,3 +515,29 @@ def _area_outside(vertices, z0, b):
         if len(Q) >= 3:
             total += 0.5 * abs(np.dot(Q[:, 0], np.roll(Q[:, 1], -1)) - np.dot(Q[:, 1], np.roll(Q[:, 0], -1)))
     return total
+
+
+def _sigpipe_ignored() -> bool:
+    """Whether the kernel ignores SIGPIPE for this process (/proc/self/status SigIgn, bit 13 - 1)."""
+    with open("/proc/self/status") as f:
+        mask = int(next(line for line in f if line.startswith("SigIgn")).split()[1], 16)
+    return bool(mask >> 12 & 1)
+
+
+@pytest.mark.skipif(not __import__("os").path.exists("/proc/self/status"), reason="reads Linux's /proc")
+@pytest.mark.parametrize("in_thread", [False, True])
+def test_meshing_leaves_sigpipe_ignored(in_thread):
+    """gmsh.initialize sets SIGPIPE back to 'terminate' behind Python's back (track.solid.mesh module doc):
+    after a mesh, from the main thread or another one (a Dask worker's), the kernel still ignores it, so a
+    write to a closed pipe raises BrokenPipeError instead of killing the process. Fails without the fix."""
+    import threading
+
+    assert _sigpipe_ignored()   # Python's start-up state
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    if in_thread:
+        t = threading.Thread(target=section_mesh, args=(square, 0.5))
+        t.start()
+        t.join()
+    else:
+        section_mesh(square, 0.5)
+    assert _sigpipe_ignored()

@@ -16,9 +16,18 @@ has flat faces only and the mesh is made with ``Mesh.SecondOrderLinear``).
 gmsh is a process-wide singleton and not thread-safe: mesh from one thread at a
 time. If the caller has initialised gmsh already, a temporary model is added and
 removed again (mesh options set here stay set).
+
+``gmsh.initialize`` sets SIGPIPE back to its default action (terminate the process)
+behind Python's back (Python ignores it, so that a write to a closed pipe raises
+``BrokenPipeError``); :func:`_keep_sigpipe` restores what Python had. Without it a process
+that had built a solid crossing died silently when a worker of its process pool died
+(its pool's feeder thread wrote to the dead worker's pipe): found when CI's run of
+tests/test_sweep.py after tests/test_solid.py ended with exit status 141, 2026-11-26.
 """
 from __future__ import annotations
 
+import signal
+import threading
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -34,6 +43,17 @@ TET_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
 MIDNODE_TOL = 1e-6  # relative to the edge length: a mid-edge node this close to the midpoint is "on" it
 
 
+def _keep_sigpipe(before) -> None:
+    """Give SIGPIPE back the disposition ``before`` (Python's, read before gmsh was initialised; module doc)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGPIPE, before)
+    elif before == signal.SIG_IGN:   # signal.signal works in the main thread only; the disposition is per process
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.signal.argtypes, libc.signal.restype = [ctypes.c_int, ctypes.c_void_p], ctypes.c_void_p
+        libc.signal(int(signal.SIGPIPE), int(signal.SIG_IGN))
+
+
 @contextmanager
 def _gmsh_model(name: str):
     """A fresh gmsh model, removed afterwards; gmsh is finalised if we initialised it."""
@@ -43,7 +63,10 @@ def _gmsh_model(name: str):
     if own:
         # interruptible=False: gmsh would otherwise install a SIGINT handler, which fails
         # outside the main thread (executor / dask workers).
+        sigpipe = signal.getsignal(signal.SIGPIPE) if hasattr(signal, "SIGPIPE") else None
         gmsh.initialize(readConfigFiles=False, interruptible=False)
+        if sigpipe is not None:
+            _keep_sigpipe(sigpipe)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)   # reproducible meshes
