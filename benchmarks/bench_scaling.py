@@ -49,32 +49,20 @@ def _loop_wall(overrides: list[str], scenario: Path = DEFAULT) -> tuple[float, i
     return best, steps, dofs
 
 
-def sleepers_study() -> float:
-    print(f"{'sleepers':>8} {'dofs':>6} {'steps':>6} {'loop [s]':>9} {'us/step':>8}")
+def sleepers_series(label: str, scenario: Path, overrides) -> float:
+    """Loop wall against sleeper count for ``scenario`` (``overrides(n)``: its overrides at n sleepers);
+    prints the table and the fitted exponents against sleepers and reduced dofs; returns the former."""
+    print(f"{label}\n{'sleepers':>8} {'dofs':>6} {'steps':>6} {'loop [s]':>9} {'us/step':>8}")
     walls, sizes = [], []
     for n in SLEEPERS:
-        wall, steps, dofs = _loop_wall([f"track.layout.sleepers={n}", f"track.layout.transition_sleeper={min(n // 2 + 1, 25)}",
-                                        f"simulation.duration={DURATION}"])
+        wall, steps, dofs = _loop_wall([f"track.layout.sleepers={n}", f"simulation.duration={DURATION}",
+                                        *overrides(n)], scenario)
         walls.append(wall)
         sizes.append(dofs)
         print(f"{n:8d} {dofs:6d} {steps:6d} {wall:9.3f} {1e6 * wall / steps:8.1f}")
     p = np.polyfit(np.log(SLEEPERS), np.log(walls), 1)[0]
     q = np.polyfit(np.log(sizes), np.log(walls), 1)[0]
-    print(f"fitted exponent: wall ~ sleepers^{p:.2f} (target <= 1.1); wall ~ reduced dofs^{q:.2f} "
-          f"(behind the crossing the bearers lengthen, so dofs grow faster than sleepers)")
-    return p
-
-
-def plain_study() -> float:
-    print(f"plain track\n{'sleepers':>8} {'dofs':>6} {'steps':>6} {'loop [s]':>9} {'us/step':>8}")
-    walls = []
-    for n in SLEEPERS:
-        wall, steps, dofs = _loop_wall([f"track.layout.sleepers={n}", "simulation.step=1e-4",
-                                        f"simulation.duration={DURATION}"], PLAIN)
-        walls.append(wall)
-        print(f"{n:8d} {dofs:6d} {steps:6d} {wall:9.3f} {1e6 * wall / steps:8.1f}")
-    p = np.polyfit(np.log(SLEEPERS), np.log(walls), 1)[0]
-    print(f"fitted exponent, plain track: wall ~ sleepers^{p:.2f} (target <= 1.1)")
+    print(f"fitted exponent, {label}: wall ~ sleepers^{p:.2f} (target <= 1.1); wall ~ reduced dofs^{q:.2f}")
     return p
 
 
@@ -88,6 +76,8 @@ def step_study() -> None:
 
 if __name__ == "__main__":
     print(f"bench_scaling: {time.strftime('%Y-%m-%d %H:%M')}, {platform.node()}, {platform.processor() or platform.machine()}")
-    sleepers_study()
-    plain_study()
+    # turnout: the transition sleeper at the middle, at most 25 (no switch panel is modelled); behind the
+    # crossing the bearers lengthen, so its dofs grow faster than its sleepers
+    sleepers_series("turnout", DEFAULT, lambda n: [f"track.layout.transition_sleeper={min(n // 2 + 1, 25)}"])
+    sleepers_series("plain track", PLAIN, lambda n: ["simulation.step=1e-4"])   # the turnout's step
     step_study()

@@ -24,6 +24,18 @@ def _inputs():
     return target, cmp(0.9), cmp(0.98), layout
 
 
+C0 = (0x1F, 0x77, 0xB4)   # matplotlib's first cycle colour: the nominal curve and the nominal residual bars
+
+
+def _has_colour(png: bytes, rgb: tuple) -> bool:
+    """Whether a pixel of the PNG has exactly the colour ``rgb`` (0-255; anti-aliased edges differ, line cores not)."""
+    import io
+
+    import matplotlib.image as mpimg
+    img = np.round(mpimg.imread(io.BytesIO(png), format="png")[..., :3] * 255).astype(int)
+    return bool((img == np.array(rgb)).all(axis=-1).any())
+
+
 def test_plots_drawn_by_workers_are_the_plots_drawn_here(tmp_path):
     """Consistency check (two paths of ours): each figure a worker process draws from the channels it is
     handed is byte for byte the one drawn here from the whole comparison (the same matplotlib, no time
@@ -40,7 +52,10 @@ def test_plots_drawn_by_workers_are_the_plots_drawn_here(tmp_path):
     report._draw_all(fallback, figures, ex)    # shut down: RuntimeError on submit, drawn here
     for name, _, _ in figures:
         png = (here / name).read_bytes()
-        assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000   # a real image, not an empty canvas
+        # a whole PNG (10 kB is under any figure of this size: empty axes of one panel are 12.8 kB, measured,
+        # so this rules out a truncated file, not an empty plot) ...
+        assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+        assert _has_colour(png, C0)   # ... with curves or bars in it: the nominal curve / bars colour is drawn
         assert (there / name).read_bytes() == png and (fallback / name).read_bytes() == png
     # cut down to a group's channels (what goes to a worker), the figure is the one of the whole comparison
     for g in ("A", "B"):

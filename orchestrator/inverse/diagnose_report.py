@@ -124,8 +124,8 @@ def write_report(out_dir: Path, result: Diagnosis, target, before, after, layout
     ``executor`` (optional) draws the plots on its workers (module doc).
     """
     out_dir = Path(out_dir)
-    groups = sorted({layout.groups[k] for k in before.channels})
-    _draw_all(out_dir, _figures(target, before, after, layout), executor)
+    figures = _figures(target, before, after, layout)
+    _draw_all(out_dir, figures, executor)
     lines = (_verdict_lines(result) + _baseline_lines(result, before, after) + _nuisance_lines(result)
              + _interval_lines(result) + _cause_lines(result) + _dropped_lines(result))
     if result.validation:
@@ -135,7 +135,7 @@ def write_report(out_dir: Path, result: Diagnosis, target, before, after, layout
             lines.append(f"| {v.file} | {v.speed:.4g} | {v.objective_before:.4g} | "
                          f"{v.objective_after:.4g} | {100 * v.gain:.1f} % |")
         lines.append("")
-    lines += ["Plots: " + ", ".join(f"`overlay_{g}.png`" for g in groups) + ", `residuals.png`.", ""]
+    lines += ["Plots: " + ", ".join(f"`{name}`" for name, _, _ in figures) + ".", ""]
     path = out_dir / "report.md"
     path.write_text("\n".join(lines), encoding="utf-8")
     return path

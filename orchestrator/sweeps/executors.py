@@ -104,6 +104,8 @@ def executor_slots(executor: cf.Executor) -> int:
     """Runs ``executor`` takes at once: a local pool's processes, a cluster's worker threads; 1 if unknown."""
     if isinstance(executor, DaskExecutor):
         return executor.slots
+    # concurrent.futures' process and thread pools keep their max_workers as _max_workers (since 3.2);
+    # any other executor counts as one slot (nothing runs ahead on it)
     return max(1, int(getattr(executor, "_max_workers", 1) or 1))
 
 

@@ -12,7 +12,8 @@ This module holds :func:`run_sweep`, which ties them together, its result
 :func:`run_sweep` in stages: plan and check everything (nothing runs on a bad key,
 value or option), read the runs already finished, run the missing ones (the table is
 rewritten every :data:`TABLE_EVERY` seconds as they come), then write the table and the
-plots and sort out what did not finish. The runs travel to the workers by value and come back by value
+plots and sort out what did not finish. The runs travel to the workers by value and come
+back by value
 (:mod:`orchestrator.sweeps.store`): a Dask cluster on other machines needs no shared
 file system, and only this process writes ``OUT``.
 """
@@ -320,7 +321,8 @@ def _check_options(options: _Options) -> None:
 
 def _run_missing(plan: SweepPlan, todo: Sequence[Run], store: SweepStore, outcome: _Outcome,
                  options: _Options) -> None:
-    """Run ``todo`` on the executor into ``store``; fills ``outcome``, rewrites the table as runs come in (:func:`_collect`).
+    """Run ``todo`` on the executor into ``store``; fills ``outcome``, rewrites the table as runs come in
+    (:func:`_collect`).
 
     An executor made here is shut down at the end; one passed in is left running (the
     runs it still has are cancelled when this is interrupted).

@@ -46,8 +46,9 @@ column by column (the targets within a column are distinct), the forward sweep o
 ``L y = b`` column by column (``y_j`` is final when column j's entries come: all
 its updates come from columns < j) and the backward sweep of ``L^T z = y`` over the
 same entries from the last (``z_j`` is final when column j's entries have come: they
-follow those of every column > j; :func:`ldl_solve`). Measured on the 64-sleeper panel's matrices, old and new loops in one
-script: solve 77 -> 59 us, K product 30 -> 20 us (benchmarks/RESULTS.md, 2026-11-25).
+follow those of every column > j; :func:`ldl_solve`). Measured on the 64-sleeper panel's
+matrices, old and new loops in one script: solve 77 -> 59 us, K product 30 -> 20 us
+(benchmarks/RESULTS.md, 2026-11-25).
 
 Round-off entries. The Craig–Bampton products ``T^T K T`` leave entries that are
 zero in exact arithmetic (the constraint modes are K-orthogonal to the
