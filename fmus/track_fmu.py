@@ -98,22 +98,22 @@ from .base import UNITS, CosimSlave
 
 try:  # inside a built FMU the model package is bundled next to this module
     from .track import ballast as _ballast
+    from .track import cache as _cache
     from .track import cosim as _cosim
     from .track import dynamics as _dynamics
     from .track import model as _model
     from .track import params as _params
     from .track import sensors as _sensors
-    from .track.solid import crossing as _crossing
 except ModuleNotFoundError as _exc:  # source tree: src/ on sys.path
     if _exc.name != f"{__package__}.track":
         raise   # a dependency of the bundled package is missing (scipy, ...): say which
     from track import ballast as _ballast
+    from track import cache as _cache
     from track import cosim as _cosim
     from track import dynamics as _dynamics
     from track import model as _model
     from track import params as _params
     from track import sensors as _sensors
-    from track.solid import crossing as _crossing
 
 # ballast bed stiffness is given per metre of sleeper: N/m per m; accelerations (fmus.base's unit registry)
 UNITS.setdefault("N/m2", {"kg": 1, "m": -1, "s": -2})
@@ -590,7 +590,7 @@ class Track(CosimSlave):
         params = self.track_params()
         if self._model is None or params != self._built:
             # the FMU is an edge: it, not track/, chooses the solid's disk cache (from the host's environment)
-            self._model = _model.build_track(params, cache_dir=_crossing.cache_dir_from_env(os.environ))
+            self._model = _model.build_track(params, cache_dir=_cache.cache_dir_from_env(os.environ))
             self._built = params
             self._reader = SensorReader(self._model, self._sensors) if self._sensors else None
         self._sensor_values = None

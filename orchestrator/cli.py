@@ -11,6 +11,7 @@ set ``TURNOUT_DEBUG=1`` to get the traceback of an OSError instead.
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import os
 import sys
@@ -450,5 +451,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERRUPTED
 
 
+def console(argv: Sequence[str] | None = None) -> int:
+    """The installed ``turnout`` script (and ``python -m orchestrator.cli``): :func:`main`, and then
+    the objects the command made are frozen out of the garbage collector.
+
+    The process ends next. Its exit collection would walk every object the run made (numba's
+    dispatchers, the FMUs' ctypes, the model's arrays) only to free memory the OS takes back
+    anyway: ~0.13 s of the default ``turnout run``'s ~3 s, measured. Every file is closed by
+    then and ``atexit`` handlers (temporary folders, worker pools) still run. Not in
+    :func:`main`, which tests call in a process that goes on.
+    """
+    status = main(argv)
+    gc.freeze()
+    return status
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(console())

@@ -308,3 +308,45 @@ def test_fmus_are_built_once_per_build_inputs_and_copied_from_the_cache(tmp_path
     build_job.cached_fmus(sc, tmp_path / "c", {"TURNOUT_CACHE": "off"})
     assert builds[-1] == tmp_path / "c" and len(builds) == 2
     assert len(list((tmp_path / "cache" / build_job.FMU_CACHE_FOLDER).iterdir())) == 1
+
+
+_FMU_RUN_HERE_AND_IN_A_WORKER = """
+import concurrent.futures as cf, multiprocessing, sys
+from orchestrator.cosim.master import run_cosim
+from orchestrator.inputs.scenario import load_scenario
+
+def run(path, sets):
+    return len(run_cosim(load_scenario(path, sets), backend="fmu").t)
+
+if __name__ == "__main__":
+    with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        n_worker = pool.submit(run, sys.argv[1], sys.argv[2:]).result()
+    assert run(sys.argv[1], sys.argv[2:]) == n_worker   # a second time here: the FMUs' folders are reused
+    assert run(sys.argv[1], sys.argv[2:]) == n_worker
+"""
+
+
+def test_runs_via_fmus_leave_nothing_in_the_temp_folder(tmp_path):
+    """FMPy unzips each FMU to a new temporary folder; they used to stay (~2 MB a run via FMUs,
+    and every run of a sweep's worker). The installed ``turnout`` script (its ``console`` entry),
+    a process running three co-simulations and a spawned pool worker running one each leave an
+    empty temp folder behind (``TMPDIR``, which Python's ``tempfile`` and FMPy's ``extract`` use)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = {**os.environ, "TMPDIR": str(tmp)}
+    sets = [a for s in QUICK for a in ("--set", s)]
+    done = subprocess.run([str(Path(sys.executable).with_name("turnout")), "run", str(PLAIN_SCENARIO), "--out",
+                           str(tmp_path / "run"), "--no-progress", *sets], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "run" / "results.h5").is_file()
+    script = tmp_path / "fmu_runs.py"   # a file: a spawned worker imports its __main__ by path
+    script.write_text(_FMU_RUN_HERE_AND_IN_A_WORKER)
+    done = subprocess.run([sys.executable, str(script), str(PLAIN_SCENARIO), *QUICK], env=env, capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in tmp.iterdir()) == []

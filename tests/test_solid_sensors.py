@@ -25,9 +25,10 @@ from orchestrator.cli import main
 from orchestrator.inputs.scenario import load_scenario
 from orchestrator.inputs.sensor_layout import load_layout, resolve
 from orchestrator.inputs.track_model import track_model
+from track.cache import cache_dir_from_env
 from track.sensors import Sensor, compile_sensors, displacement_row, solid_strain_row
 from track.solid.body import SolidRailParams
-from track.solid.crossing import cache_dir_from_env, solid_crossing
+from track.solid.crossing import solid_crossing
 from track.solid.fem import locate, probe_matrix, shape_rows
 from track.solid.section import rail_60e1_like
 

@@ -19,7 +19,7 @@ plain track) the track FMU gets no sensor outputs and a warning says why.  A lay
 scenario names must fit.
 
 A run does not rebuild them every time (:func:`cached_fmus`): the FMUs of a scenario
-are kept in the user's cache folder (``$TURNOUT_CACHE``, :func:`track.solid.crossing.cache_dir_from_env`)
+are kept in the user's cache folder (``$TURNOUT_CACHE``, :func:`track.cache.cache_dir_from_env`)
 under a hash of everything the build reads (:func:`build_inputs` and the sources it
 bundles), and copied from there.  ``turnout build-fmus`` always builds afresh.
 """
@@ -37,7 +37,7 @@ from pathlib import Path
 from orchestrator.cosim.passage import n_wheels, start_position
 from orchestrator.inputs.sensor_layout import scenario_sensors
 from track.layout import build_layout
-from track.solid.crossing import cache_dir_from_env
+from track.cache import cache_dir_from_env
 
 VEHICLE_KINDS = ("bogie", "quarter")
 FMU_CACHE_FOLDER = "fmus"     # under the cache folder: one sub-folder per build key

@@ -17,6 +17,8 @@ FMPy's low-level API.
 from __future__ import annotations
 
 import ctypes
+import os
+import shutil
 import time
 from pathlib import Path
 
@@ -28,6 +30,34 @@ from orchestrator.inputs.specs import PortMap
 
 class CosimError(UserInputError):
     """The co-simulation stopped (a unit failed or the coupled solution diverged)."""
+
+
+_UNZIPPED: dict[tuple, str] = {}   # (FMU file, size, mtime) -> the folder it is unzipped to, this process
+
+
+def _unzipped(path: Path) -> str:
+    """The folder ``path`` is unzipped to: once per process and FMU file (path, size, mtime), removed
+    when the process ends.
+
+    FMPy's ``extract`` makes a new temporary folder at each call and nothing removed them: every
+    run via FMUs left ~2 MB behind in the temp folder (two FMUs with their bundled Python
+    packages), every run of a sweep's worker too. A folder is not removed when its FMU is freed:
+    the FMU's Python package was imported from it (pythonfmu), stays in ``sys.modules`` for the
+    next instance of the same FMU, and may import a module of it later; so the next run reuses
+    the folder. Removed by a ``multiprocessing`` finalizer, which runs at the exit of the main
+    process (atexit) and of pool workers (which skip atexit).
+    """
+    from fmpy import extract
+    from multiprocessing.util import Finalize
+
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    folder = _UNZIPPED.get(key)
+    if folder is None or not os.path.isdir(folder):
+        folder = extract(str(path))
+        Finalize(None, shutil.rmtree, args=(folder,), kwargs={"ignore_errors": True}, exitpriority=0)
+        _UNZIPPED[key] = folder
+    return folder
 
 
 class InProcessVehicle:
@@ -162,7 +192,7 @@ class FmuUnit:
     """
 
     def __init__(self, path: Path, name: str, start_values: dict | None = None):
-        from fmpy import extract, read_model_description
+        from fmpy import read_model_description
         from fmpy.fmi2 import FMU2Slave
 
         self.path, self.name = Path(path), name
@@ -170,7 +200,7 @@ class FmuUnit:
         if self.md.coSimulation is None:
             raise UserInputError(f"{path}: not a co-simulation FMU")
         self.vars = {v.name: v for v in self.md.modelVariables}
-        self._dir = extract(str(path))
+        self._dir = _unzipped(self.path)
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._dir,
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
         self.fmu.instantiate(loggingOn=False)

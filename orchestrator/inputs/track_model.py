@@ -17,7 +17,7 @@ import os
 from track.layout import Layout
 from track.model import TrackModel, build_track
 from track.params import TrackParams
-from track.solid.crossing import cache_dir_from_env
+from track.cache import cache_dir_from_env
 
 
 _LAST: list = []   # [(params, cache folder), model] of the last build without a given layout

@@ -509,7 +509,7 @@ def build_track(params: TrackParams, layout: Layout | None = None, *, cache_dir=
         A precomputed layout of ``params.layout``.
     cache_dir : path-like, optional
         Folder of the on-disk caches: the solid crossing rail (``track.model: solid``; see
-        :func:`track.solid.crossing.cache_dir_from_env`) and the reduced beam bodies
+        :func:`track.cache.cache_dir_from_env`) and the reduced beam bodies
         (:func:`_reduce_cached`); None keeps them in memory only.
 
     Returns

@@ -44,7 +44,7 @@ The reduced body is kept in-process and, when the caller passes a folder, on
 disk, keyed by every parameter that changes it (geometry, mesh size, cut-off), so
 parameter studies on bushings and ballast build it once. This module never chooses
 the folder: the edges do (the orchestrator and the track FMU pass
-:func:`cache_dir_from_env` of their environment: ``$TURNOUT_CACHE``, default
+:func:`track.cache.cache_dir_from_env` of their environment: ``$TURNOUT_CACHE``, default
 ``~/.cache/turnout``; ``TURNOUT_CACHE=off`` disables the disk cache).
 """
 from __future__ import annotations
@@ -54,7 +54,6 @@ import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 import scipy.sparse as sp
@@ -403,22 +402,6 @@ def _key(p: SolidRailParams) -> str:
     return hashlib.sha1(repr(fields).encode()).hexdigest()
 
 
-def cache_dir_from_env(environ: Mapping[str, str]) -> Path | None:
-    """The on-disk cache folder an environment asks for; None for no disk cache.
-
-    ``TURNOUT_CACHE`` (a folder, or ``off``), else ``$XDG_CACHE_HOME/turnout``, else
-    ``~/.cache/turnout``. A pure function of ``environ``: the caller passes its
-    environment and hands the result to :func:`solid_crossing` / ``build_track``.
-    """
-    env = environ.get("TURNOUT_CACHE")
-    if env is not None and env.strip().lower() in ("off", "0", "none", ""):
-        return None
-    if env:
-        return Path(env)
-    base = environ.get("XDG_CACHE_HOME")
-    return (Path(base) if base else Path.home() / ".cache") / "turnout"
-
-
 _ARRAYS = ("K", "M", "T", "points", "tets", "end_q", "seat_s", "seat_q", "contact_s", "contact_q",
            "station_s", "W", "Mom", "weight", "mode_freqs")
 
@@ -457,7 +440,7 @@ def solid_crossing(p: SolidRailParams, cache_dir: Path | None = None) -> SolidCr
     ----------
     p : SolidRailParams
     cache_dir : Path, optional
-        Folder of the on-disk cache (:func:`cache_dir_from_env`); None: in memory only.
+        Folder of the on-disk cache (:func:`track.cache.cache_dir_from_env`); None: in memory only.
 
     Returns
     -------
@@ -531,4 +514,4 @@ def _moment_row(points: np.ndarray, tets: np.ndarray, p: SolidRailParams, s: flo
 
 
 __all__ = ["SolidCrossing", "solid_crossing", "build_solid_crossing", "solid_params", "solid_extent",
-           "trimmed_section_properties", "cache_dir_from_env", "clear_solid_cache", "SOLID_SPANS"]
+           "trimmed_section_properties", "clear_solid_cache", "SOLID_SPANS"]
