@@ -71,3 +71,34 @@ def test_hanging_sleeper_equilibrium():
     assert np.all(ballast_forces(model, st.q)[sel] == 0.0)
     assert np.all(st.q[model.ballast.dof[sel]] > -3e-3)
     assert np.all(st.q[model.ballast.dof[sel]] < 0.0)  # it does sag with the rails
+
+
+def test_the_two_sleepers_of_a_split_position_each_stand_on_their_own_ballast():
+    """A 64-sleeper panel behind a 1:12 crossing (transition sleeper 25) splits its last positions into
+    one sleeper per track (track.layout._bearer). In the static equilibrium under self-weight each of
+    the two carries its own weight and its rails' pad forces to its own ballast: the vertical balance
+    holds piece by piece (nothing crosses the gap), no ballast bushing and no FE node lies in the gap.
+    Tolerance 1e-8 of the piece's weight: the static solve's residual is 1e-10 of the whole load vector
+    (~100 sleepers' and rails' weight), which is ~100x one piece's."""
+    from track.params import GRAVITY
+    model = build_track(TrackParams(layout=LayoutParams(type="turnout", sleepers=64, transition_sleeper=25)))
+    q = static_equilibrium(model).q
+    fb = ballast_forces(model, q)
+    pads = model.pads
+    split = [sl for sl in model.layout.sleepers if sl.gap]
+    assert len(split) >= 5
+    for sl in split:
+        body = model.sleeper(sl.index)
+        g0, g1 = sl.gap
+        nodes_y = body.origin + body.fom.s
+        assert not ((nodes_y > g0 + 1e-9) & (nodes_y < g1 - 1e-9)).any()
+        on = model.ballast.sleeper == sl.index
+        assert not ((model.ballast.y[on] > g0) & (model.ballast.y[on] < g1)).any()
+        base = sl.profile.base
+        for a, b in sl.pieces:
+            bal = on & (model.ballast.y > a) & (model.ballast.y < b)
+            mine = (pads.sleeper == sl.index) & (pads.y > a) & (pads.y < b)
+            f_pad = np.sum(pads.k[mine] * (q[pads.i[mine]] - q[pads.j[mine]]))   # on the sleeper, up +
+            weight = base.rho * base.A * (b - a) * GRAVITY
+            assert mine.sum() == 2 and bal.sum() >= 2
+            assert abs(fb[bal].sum() + f_pad - weight) < 1e-8 * weight, (sl.index, a, b)

@@ -237,6 +237,42 @@ def test_sleepers_span_seats_and_grow(crossing, R):
 
 
 @pytest.mark.parametrize("crossing,R", CURVED)
+@pytest.mark.parametrize("hand", HANDS)
+def test_long_panels_end_their_bearers_where_two_sleepers_fit(crossing, R, hand):
+    """Far behind the crossing each track gets its own sleeper: a position is split exactly where two
+    sleepers of ``sleeper_length``, centred on the through centreline (y = 0) and on the diverging one
+    (closed form y_div(x, d = 0)), no longer overlap, i.e. y_div >= sleeper_length; the pieces are those
+    two sleepers, every seat lies on one with at least BEARER_OVERHANG to its ends, and the bearers
+    ahead of the split stay under 5.2 m (two sleepers' length plus the rounding step)."""
+    p = turnout(crossing, R, hand=hand, sleepers=120, transition_sleeper=25)
+    lay = build_layout(p)
+    sign, n, half = (1.0 if hand == "left" else -1.0), nvalue(crossing), p.sleeper_length / 2
+    seats = {sl.index: [] for sl in lay.sleepers}
+    for r in lay.rails:
+        for st in r.seats:
+            seats[st.sleeper].append(sign * st.y)          # canonical frame (left hand)
+    split = []
+    for sl in lay.sleepers:
+        yd = y_div(sl.x, R, n, 0.0)
+        # no position within 1 mm of the boundary here (checked: the nearest is 4.4 mm off), so the
+        # comparison of the two computations of y_div cannot flip on round-off
+        assert abs(yd - 2 * half) > 1e-3
+        if yd < 2 * half:
+            # unsplit: from -half to the diverging stock rail's seat (yd + g/2 + hw) plus the overhang,
+            # < 3 half + 1.2535 m = 5.15 m, rounded up to the 0.1 m step: <= two sleepers' length
+            assert sl.gap == () and sl.length <= 4 * half + 1e-9
+            continue
+        split.append(sl.index)
+        pieces = sorted(tuple(sorted((sign * a, sign * b))) for a, b in sl.pieces)
+        ref = [(-half, half), (yd - half, yd + half)]
+        assert np.allclose(pieces, ref, atol=TOL_Y, rtol=0), (sl.index, pieces, ref)
+        for y in seats[sl.index]:
+            assert any(a + BEARER_OVERHANG - TOL_Y <= y <= b - BEARER_OVERHANG + TOL_Y for a, b in pieces), y
+    assert split and split == list(range(split[0], p.sleepers))     # from the first split to the panel end
+    assert split[0] > p.transition_sleeper + 10                        # well behind the crossing
+
+
+@pytest.mark.parametrize("crossing,R", CURVED)
 @pytest.mark.parametrize("t", [None, 15, 25])
 def test_transition_sleeper_at_transfer_point(crossing, R, t):
     """The transition sleeper sits where the nose (L_d - L_t) is 20 mm wide."""

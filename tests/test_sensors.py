@@ -115,3 +115,18 @@ def test_layout_positions_are_checked_on_the_model(turnout, entry, words):
     lay = layout_from_dict({"sensors": [entry]}, "lay.yaml")
     with pytest.raises(UserInputError, match=words):
         resolve(lay, model)
+
+
+def test_a_sensor_between_the_two_sleepers_of_a_split_position_is_refused():
+    """Where a long panel carries one sleeper per track (track.layout._bearer) there is no sleeper in
+    the gap between them: a pressure cell or an accelerometer placed there is a clear error naming the
+    sensor, the position and the gap; one on either sleeper compiles."""
+    from track.params import LayoutParams, TrackParams
+    model = build_track(TrackParams(layout=LayoutParams(type="turnout", sleepers=64, transition_sleeper=25)))
+    sl = next(s for s in model.layout.sleepers if s.gap)
+    mid = 0.5 * (sl.gap[0] + sl.gap[1])
+    for kind in ("pressure", "acceleration"):
+        with pytest.raises(ValueError, match=rf"sensor X: y = .* between the two sleepers of position {sl.index}"):
+            compile_sensors(model, [Sensor("X", kind, "A", f"sleeper_{sl.index}", mid)])
+    ok = [Sensor(f"P{i}", "pressure", "A", f"sleeper_{sl.index}", 0.5 * (a + b)) for i, (a, b) in enumerate(sl.pieces)]
+    assert compile_sensors(model, ok).Pb.any(axis=1).all()

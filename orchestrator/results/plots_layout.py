@@ -52,10 +52,10 @@ def _draw_sleepers(ax, layout) -> None:
     for sl in layout.sleepers:
         w = sl.profile.base.width
         hot = sl.index == transition
-        ax.add_patch(Rectangle((sl.x - w / 2, sl.y_start), w, sl.length,
-                               facecolor="gold" if hot else "0.85",
-                               edgecolor="darkgoldenrod" if hot else "0.6", lw=0.6, zorder=1,
-                               label="transition sleeper" if hot else None))
+        for a, b in sl.pieces:      # two sleepers where the tracks have separated (track.layout._bearer)
+            ax.add_patch(Rectangle((sl.x - w / 2, a), w, b - a, facecolor="gold" if hot else "0.85",
+                                   edgecolor="darkgoldenrod" if hot else "0.6", lw=0.6, zorder=1,
+                                   label="transition sleeper" if hot else None))
         if sl.index % LABEL_EVERY == 0 or hot:
             ax.text(sl.x, sl.y_start - 0.08, str(sl.index), ha="center", va="top", fontsize=7)
 

@@ -64,6 +64,8 @@ class BeamBody:
         Element stiffness matrices (for moment recovery).
     phi : ndarray, shape (n-1,)
         Element shear parameters (for the deflection shape functions).
+    empty : tuple
+        ``(s0, s1)`` spans with no material [m] (:func:`beam_body`); ``()`` for most beams.
     """
 
     name: str
@@ -73,6 +75,7 @@ class BeamBody:
     M: sp.csr_matrix
     Ke: np.ndarray
     phi: np.ndarray
+    empty: tuple = ()
 
     @property
     def ndof(self) -> int:
@@ -160,22 +163,25 @@ _BODIES_MAX = 512       # a 64-sleeper panel has ~90 bodies; a run of a study or
                         # the same ones (only pads and ballast change): 0.11 s of a 0.40 s run, measured
 
 
-def beam_body(name: str, s: np.ndarray, profile: BeamProfile) -> BeamBody:
+def beam_body(name: str, s: np.ndarray, profile: BeamProfile, empty: tuple = ()) -> BeamBody:
     """Assemble the FE model of a beam with nodes ``s`` [m] and section ``profile``.
 
-    The same inputs give the same (shared, not to be modified) :class:`BeamBody` again.
+    ``empty``: ``(s0, s1)`` spans [m] with no material (the gap between the two sleepers of a
+    split position, ``track.layout.SleeperBody.gap``): an element whose midpoint lies in one has
+    zero stiffness and mass, so the beam is two pieces with the element indices of one. The
+    same inputs give the same (shared, not to be modified) :class:`BeamBody` again.
     """
     s = np.asarray(s, dtype=float)
-    key = (name, s.tobytes(), profile)
+    key = (name, s.tobytes(), profile, tuple(empty))
     body = _BODIES.get(key)
     if body is None:
         if len(_BODIES) >= _BODIES_MAX:
             _BODIES.pop(next(iter(_BODIES)))
-        body = _BODIES[key] = _assemble_beam(name, s, profile)
+        body = _BODIES[key] = _assemble_beam(name, s, profile, tuple(empty))
     return body
 
 
-def _assemble_beam(name: str, s: np.ndarray, profile: BeamProfile) -> BeamBody:
+def _assemble_beam(name: str, s: np.ndarray, profile: BeamProfile, empty: tuple = ()) -> BeamBody:
     base = profile.base
     mid = 0.5 * (s[:-1] + s[1:])
     A, I = profile.at(mid)
@@ -183,7 +189,13 @@ def _assemble_beam(name: str, s: np.ndarray, profile: BeamProfile) -> BeamBody:
     Ke = np.empty((ne, 4, 4))
     Me = np.empty((ne, 4, 4))
     phi = np.empty(ne)
+    void = np.zeros(ne, bool)
+    for s0, s1 in empty:
+        void |= (mid > s0) & (mid < s1)
     for e in range(ne):
+        if void[e]:
+            Ke[e], Me[e], phi[e] = 0.0, 0.0, 0.0
+            continue
         L = s[e + 1] - s[e]
         Ke[e], Me[e] = timoshenko_matrices(L, base.E, base.G, A[e], I[e], base.rho, base.kappa)
         phi[e] = shear_parameter(L, base.E, base.G, A[e], I[e], base.kappa)
@@ -193,7 +205,7 @@ def _assemble_beam(name: str, s: np.ndarray, profile: BeamProfile) -> BeamBody:
     n = 2 * s.size
     K = sp.csr_matrix((Ke.ravel(), (rows, cols)), shape=(n, n))
     M = sp.csr_matrix((Me.ravel(), (rows, cols)), shape=(n, n))
-    return BeamBody(name=name, s=s, profile=profile, K=K, M=M, Ke=Ke, phi=phi)
+    return BeamBody(name=name, s=s, profile=profile, K=K, M=M, Ke=Ke, phi=phi, empty=empty)
 
 
 __all__ = ["BeamBody", "beam_body", "mesh_line"]

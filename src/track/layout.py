@@ -169,15 +169,23 @@ class RailBody:
 class SleeperBody:
     """One sleeper / turnout bearer (a beam along y at fixed x).
 
+    Behind a turnout's long bearers, where the two tracks have separated enough, a position
+    carries two sleepers, one under each track (:func:`_bearer`); they are one body here
+    (one index, as the ballast, voids and sensors address them), spanning both, with ``gap``
+    the empty span between them: no material, no ballast.
+
     Attributes
     ----------
     index : int
     x : float
         Track coordinate of its centre line [m].
     y_start, y_end : float
-        Lateral extent [m].
+        Lateral extent [m] (of both sleepers, when split).
     profile : BeamProfile
         Section along the bearer (s = y - y_start).
+    gap : tuple
+        ``(y0, y1)``: the lateral span between the two sleepers of a split position [m]; ``()``
+        for one sleeper or bearer.
     """
 
     index: int
@@ -185,10 +193,20 @@ class SleeperBody:
     y_start: float
     y_end: float
     profile: BeamProfile
+    gap: tuple = ()
 
     @property
     def length(self) -> float:
+        """Lateral extent [m] (both sleepers and the gap between them, when split)."""
         return self.y_end - self.y_start
+
+    @property
+    def pieces(self) -> tuple:
+        """The ``(y_start, y_end)`` [m] of each sleeper at this position (two when split)."""
+        if not self.gap:
+            return ((self.y_start, self.y_end),)
+        return ((self.y_start, self.gap[0]), (self.gap[1], self.y_end))
+
 
 
 @dataclass(frozen=True)
@@ -505,20 +523,36 @@ def _crossing_profile(x_cf: float, x_tcp: float, x_cr: float, base) -> BeamProfi
     return BeamProfile(base=base, s=s, area_factor=f, inertia_factor=f)
 
 
-def _bearer(j: int, x: float, ys: list, p: LayoutParams, sign: float) -> SleeperBody:
-    """Bearer ``j`` spanning the canonical seat positions ``ys`` with overhang.
+def _bearer(j: int, x: float, ys: list, p: LayoutParams, sign: float, y_div: float) -> SleeperBody:
+    """Bearer ``j`` spanning the canonical seat positions ``ys`` with overhang, or two sleepers.
 
     Lengths are rounded up to ``BEARER_LENGTH_STEP`` by extending the diverging-side
     end, so the through-side ends line up (as bearers are usually laid).
+
+    Where two sleepers of ``p.sleeper_length``, one centred on each track (the through
+    centreline ``y = 0`` and the diverging one ``y_div``, canonical frame), fit side by side
+    and carry every seat with at least ``BEARER_OVERHANG``, the position gets those two
+    instead, as a turnout's long bearers end where the tracks have separated: the bearers
+    reach ~5.2 m (DESIGN.md's 2.6-5 m bearers) and no further, however long the panel.
     """
     half = p.sleeper_length / 2
     lo = min(min(ys) - BEARER_OVERHANG, -half)
     hi = max(max(ys) + BEARER_OVERHANG, half)
     steps = math.ceil(round((hi - lo) / BEARER_LENGTH_STEP, 9))
     hi = lo + steps * BEARER_LENGTH_STEP
-    y0, y1 = (lo, hi) if sign > 0 else (-hi, -lo)
+    gap = ()
+    ys = np.asarray(ys, dtype=float)
+    if y_div - half >= half and lo >= -half:
+        on_through = np.abs(ys) <= half - BEARER_OVERHANG
+        on_div = np.abs(ys - y_div) <= half - BEARER_OVERHANG
+        if (on_through | on_div).all():
+            lo, hi, gap = -half, y_div + half, (half, y_div - half)
+    if sign > 0:
+        y0, y1 = lo, hi
+    else:
+        y0, y1, gap = -hi, -lo, tuple(-g for g in gap[::-1])
     return SleeperBody(index=j, x=float(x), y_start=float(y0), y_end=float(y1),
-                       profile=BeamProfile(base=CONCRETE_BEARER))
+                       profile=BeamProfile(base=CONCRETE_BEARER), gap=tuple(float(g) for g in gap))
 
 
 def _check_min_seats(rails) -> None:
@@ -619,7 +653,8 @@ def _build_turnout(p: LayoutParams) -> Layout:
     for r in rails:
         for st in r.seats:
             seat_y[st.sleeper].append(geo.sign * st.y)
-    sleepers = tuple(_bearer(j, xs[j], seat_y[j], p, geo.sign) for j in range(N))
+    y_div = np.abs(geo.diverging_y(xs, 0.0))   # the diverging centreline, canonical frame
+    sleepers = tuple(_bearer(j, xs[j], seat_y[j], p, geo.sign, float(y_div[j])) for j in range(N))
 
     joints = (Joint(x_cf, (("closure_through", "end"), ("closure_div", "end"), ("crossing", "start"))),
               Joint(x_cr, (("crossing", "end"), ("rear_through", "start"), ("rear_div", "start"))))

@@ -276,10 +276,12 @@ _ROM_CACHE: dict = {}
 ROM_CACHE_MAX = 4096  # bodies kept in memory (a 40-sleeper panel has ~50)
 
 
-def _rom_key(s: np.ndarray, profile, boundary: np.ndarray, f_modes: float) -> str:
+def _rom_key(s: np.ndarray, profile, boundary: np.ndarray, f_modes: float, empty: tuple = ()) -> str:
     h = hashlib.sha1()
     h.update(np.round(s, 9).tobytes())
     h.update(repr(profile).encode())
+    if empty:    # only then: the keys of every other body stay what they were
+        h.update(repr(tuple(round(float(v), 9) for span in empty for v in span)).encode())
     h.update(np.asarray(boundary, np.int64).tobytes())
     h.update(repr(float(f_modes)).encode())
     return h.hexdigest()
@@ -294,7 +296,7 @@ def _reduce_cached(fom: BeamBody, boundary: np.ndarray, f_modes: float, stats: B
                    cache_dir=None) -> ReducedBody:
     """The Craig–Bampton body of ``fom``: from memory, from the disk cache in ``cache_dir``
     (:func:`_rom_load`), or reduced (and kept in both)."""
-    key = _rom_key(fom.s, fom.profile, boundary, f_modes)
+    key = _rom_key(fom.s, fom.profile, boundary, f_modes, fom.empty)
     rom = _ROM_CACHE.get(key)
     if rom is not None:
         stats.cache_hits += 1
@@ -607,19 +609,25 @@ def _sleeper_specs(lay: Layout, seats_on, params: TrackParams, stats: BuildStats
     bal, element_length = params.ballast, params.reduction.element_length
     specs, ballast_rows = [], []
     for sl in lay.sleepers:
-        L = sl.length
-        nb = max(2, int(np.ceil(L / bal.spacing - 1e-9)))
-        trib = L / nb
-        yb = sl.y_start + trib * (np.arange(nb) + 0.5)
         ys = np.array([y for _, _, y, _, _ in seats_on[sl.index]])
-        pts = np.concatenate([ys, yb]) - sl.y_start
-        fom = beam_body(f"sleeper_{sl.index}", mesh_line(L, pts, element_length), sl.profile)
+        nodes_s, yb_all = [], []
+        for a, b in sl.pieces:           # one sleeper, or the two of a split position (the gap one element)
+            L = b - a
+            nb = max(2, int(np.ceil(L / bal.spacing - 1e-9)))
+            trib = L / nb
+            yb = a + trib * (np.arange(nb) + 0.5)
+            mine = ys[(ys >= a - 1e-9) & (ys <= b + 1e-9)]
+            nodes_s.append(a - sl.y_start + mesh_line(L, np.concatenate([mine, yb]) - a, element_length))
+            yb_all += [(y, trib) for y in yb]
+        empty = tuple((g0 - sl.y_start, g1 - sl.y_start) for g0, g1 in zip(sl.gap[0::2], sl.gap[1::2]))
+        fom = beam_body(f"sleeper_{sl.index}", np.concatenate(nodes_s), sl.profile, empty)
+        pts = np.concatenate([ys, [y for y, _ in yb_all]]) - sl.y_start
         nodes = sorted({fom.node(s) for s in pts})
         bdofs = [2 * i for i in nodes]
         name = f"sleeper_{sl.index}"
         specs.append(_BodySpec(name, "sleeper", sl.y_start, sl.x, sl.index, fom, np.array(bdofs),
                                [(name, d) for d in bdofs]))
-        for y in yb:
+        for y, trib in yb_all:
             ballast_rows.append((sl.index, name, y, trib, sl.profile.base.width))
         stats.fom_dofs += fom.ndof
     return specs, ballast_rows

@@ -208,6 +208,10 @@ def compile_sensors(model: TrackModel, sensors) -> CompiledSensors:
             b = model.body(s.body)
         except KeyError:
             raise ValueError(f"sensor {s.id}: the track model has no body {s.body!r}") from None
+        gap = model.layout.sleepers[b.sleeper].gap if b.sleeper >= 0 else ()
+        if gap and gap[0] < s.coord < gap[1]:
+            raise ValueError(f"sensor {s.id}: y = {s.coord:.3f} m is between the two sleepers of position "
+                             f"{b.sleeper} ({gap[0]:.3f}..{gap[1]:.3f} m, one under each track): no sleeper there")
         if s.type == "pressure":
             if b.sleeper < 0:
                 raise ValueError(f"sensor {s.id}: a pressure cell must be under a sleeper, not on {s.body!r}")
