@@ -227,15 +227,18 @@ def _alive(pids) -> list[int]:
 def test_killing_the_sweep_leaves_no_worker_alive(tmp_path):
     """SIGKILL of ``turnout sweep`` while its two workers compute: both are gone within seconds.
 
-    The runs are long (a fine time step) so that the workers are in the middle of one
-    when the main process dies; without the parent-death signal they would run on.
+    The runs are many and long (a fine time step) so that the workers are in the middle of one
+    when the main process dies; without the parent-death signal they would run on. (Four runs were
+    not enough once the step was compiled: 16 000 quarter-vehicle steps take ~0.3 s, and the sweep
+    was over before both workers had spent RUNNING_CPU; 100 runs last ~50 s on 2 cores.)
     """
     base = tmp_path / "slow.yaml"
     base.write_text(MEASUREMENT.read_text(encoding="utf-8").replace("\n  step: 2.0e-4 ", "\n  step: 1.0e-5 ")
                     .replace("sensors: ../sensors/", f"sensors: {MEASUREMENT.parent.parent}/sensors/"),
                     encoding="utf-8")
     assert load_scenario(base).simulation.step == 1.0e-5
-    argv = [str(Path(sys.executable).with_name("turnout")), "sweep", str(base), "--vary", "vehicle.speed=30,31,32,33",
+    speeds = ",".join(f"{30 + 0.1 * i:.1f}" for i in range(100))
+    argv = [str(Path(sys.executable).with_name("turnout")), "sweep", str(base), "--vary", f"vehicle.speed={speeds}",
             "--workers", "2", "--out", str(tmp_path / "out"), "--no-progress"]
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
     try:
