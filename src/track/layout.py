@@ -208,7 +208,6 @@ class SleeperBody:
         return ((self.y_start, self.gap[0]), (self.gap[1], self.y_end))
 
 
-
 @dataclass(frozen=True)
 class Joint:
     """Rail bodies whose ends are rigidly joined (welded) at one x."""
@@ -542,7 +541,7 @@ def _bearer(j: int, x: float, ys: list, p: LayoutParams, sign: float, y_div: flo
     hi = lo + steps * BEARER_LENGTH_STEP
     gap = ()
     ys = np.asarray(ys, dtype=float)
-    if y_div - half >= half and lo >= -half:
+    if y_div - half >= half:    # the two sleepers do not overlap; do they carry every seat?
         on_through = np.abs(ys) <= half - BEARER_OVERHANG
         on_div = np.abs(ys - y_div) <= half - BEARER_OVERHANG
         if (on_through | on_div).all():

@@ -619,7 +619,7 @@ def _sleeper_specs(lay: Layout, seats_on, params: TrackParams, stats: BuildStats
             mine = ys[(ys >= a - 1e-9) & (ys <= b + 1e-9)]
             nodes_s.append(a - sl.y_start + mesh_line(L, np.concatenate([mine, yb]) - a, element_length))
             yb_all += [(y, trib) for y in yb]
-        empty = tuple((g0 - sl.y_start, g1 - sl.y_start) for g0, g1 in zip(sl.gap[0::2], sl.gap[1::2]))
+        empty = ((sl.gap[0] - sl.y_start, sl.gap[1] - sl.y_start),) if sl.gap else ()
         fom = beam_body(f"sleeper_{sl.index}", np.concatenate(nodes_s), sl.profile, empty)
         pts = np.concatenate([ys, [y for y, _ in yb_all]]) - sl.y_start
         nodes = sorted({fom.node(s) for s in pts})
