@@ -78,7 +78,7 @@ def step_study() -> None:
 if __name__ == "__main__":
     print(f"bench_scaling: {time.strftime('%Y-%m-%d %H:%M')}, {platform.node()}, {platform.processor() or platform.machine()}")
     # turnout: the transition sleeper at the middle, at most 25 (no switch panel is modelled); behind the
-    # crossing the bearers lengthen, so its dofs grow faster than its sleepers
+    # crossing the bearers lengthen until each track has its own sleeper (track.layout._bearer)
     sleepers_series("turnout", DEFAULT, lambda n: [f"track.layout.transition_sleeper={min(n // 2 + 1, 25)}"])
     sleepers_series("plain track", PLAIN, lambda n: ["simulation.step=1e-4"])   # the turnout's step
     step_study()

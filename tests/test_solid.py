@@ -9,6 +9,7 @@ Frame: x along the rail, y lateral, z up; 60E1 material from track.params.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import replace
 from functools import lru_cache
 
@@ -524,7 +525,7 @@ def _sigpipe_ignored() -> bool:
     return bool(mask >> 12 & 1)
 
 
-@pytest.mark.skipif(not __import__("os").path.exists("/proc/self/status"), reason="reads Linux's /proc")
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads Linux's /proc")
 @pytest.mark.parametrize("in_thread", [False, True])
 def test_meshing_leaves_sigpipe_ignored(in_thread):
     """gmsh.initialize sets SIGPIPE back to 'terminate' behind Python's back (track.solid.mesh module doc):

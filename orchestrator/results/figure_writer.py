@@ -10,8 +10,10 @@ dataclasses) while the main process writes ``results.h5``, ``sensors.csv`` and
 ``summary.json``. A figure that needs nothing from the co-simulation (the layout) is
 handed over before it and drawn during it. :meth:`FigureWriter.close` waits for the figures
 and returns one line per figure that failed: everything else is written before, so a
-failing figure loses nothing computed. (A second figure process was tried, 2026-11-26: its
-start-up slowed the run's set-up by 0.1-0.2 s, more than it saved at the end.)
+failing figure loses nothing computed. (A second figure process was tried twice, 2026-11-26:
+started with the first, its start-up slowed the run's set-up by 0.1-0.2 s; started when the
+stepping loop starts, it slowed the loop (the first one draws the layout then: three busy
+processes on two cores), 2.97 against 2.82-2.87 s for the whole run. Neither was kept.)
 
 On a machine with one core, or with ``background=False``, or where no process can be
 started, the figures are drawn in the calling process, one after the other, as before.

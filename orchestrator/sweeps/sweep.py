@@ -372,8 +372,9 @@ def _collect(futures: Mapping[cf.Future, Run], plan: SweepPlan, store: SweepStor
              bar) -> None:
     """Wait for ``futures`` as they complete; each finished run is saved in ``store`` (by this process:
     workers write nothing there) and goes into ``outcome``; the table is rewritten every
-    :data:`TABLE_EVERY` seconds and when collecting ends, however it ends. A run is finished
-    when its ``result.json`` is written, so a table a few seconds behind loses nothing."""
+    :data:`TABLE_EVERY` seconds, and here once more when collecting is cut short (an interrupt, a
+    failure of this process); after a normal end :func:`_finish` writes it. A run is finished when
+    its ``result.json`` is written, so a table a few seconds behind loses nothing."""
     written = time.monotonic()
     try:
         for future in cf.as_completed(futures):
@@ -391,8 +392,9 @@ def _collect(futures: Mapping[cf.Future, Run], plan: SweepPlan, store: SweepStor
                 store.write_table(plan, outcome.records)
                 written = time.monotonic()
             bar.update(1)
-    finally:
+    except BaseException:   # cut short: the table as far as it got (after a normal end _finish writes it)
         store.write_table(plan, outcome.records)
+        raise
 
 
 def _finish(plan: SweepPlan, store: SweepStore, outcome: _Outcome, skipped: int) -> SweepResult:
