@@ -35,6 +35,7 @@ Parameter tolerances, and why:
 """
 import numpy as np
 import pytest
+import yaml
 
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario
 from orchestrator.inputs.sensor_layout import layout_of, resolve
@@ -181,6 +182,15 @@ def test_void_and_soft_pad_next_to_it_are_both_named(tmp_path):
     assert all(c["gain"] > 0 for c in a["causes"]) and result["gain"]["total"] >= 0.5, result["gain"]
     for c in a["causes"]:
         _check_uncertainty(c)
+    # the backfitting (diagnose step 5b): a refit kept lowers J, and the extended model holds the reported values
+    ext = yaml.safe_load((tmp_path / "out" / "extended.yaml").read_text())
+    for c in a["causes"]:
+        refit = c["evidence"].get("refit")
+        if refit is not None:
+            assert refit["objective_after"] < refit["objective_before"], refit
+        if c["cause"] == "ballast_void":
+            (void,) = [v for v in ext["track"]["ballast"]["voids"] if v["sleeper"] == c["sleeper"]]
+            assert void["gaps"] == c["parameters"]["gaps"], (void, c["parameters"])
 
 
 @pytest.mark.slow

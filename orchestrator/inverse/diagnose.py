@@ -52,8 +52,16 @@ module that applies it):
    the hanging uniform void of the former fit it removed 8 % of the explainable misfit),
    and the pad's round-1 screening (on the nominal model) superposed on the void model
    ranks it 7th of 9, not among those screened again; with the truth's void the pad
-   removes 94 % of J. Re-fitting the first cause with each second one (stepwise
-   regression's refit) would address it, at ~70 runs per void refit: not done.
+   removes 94 % of J. Re-fitting the first cause with each second *candidate* (stepwise
+   regression's refit) would address that, at ~70 runs per void refit: not done.
+5b. **Backfitting** (:func:`_backfit`): once a second cause is named, each named cause's
+   parameters are fitted again (all of them, from their current values) on the model with
+   the other at its latest values, first cause first — one pass of backfitting, so the
+   extended model does not keep what the first cause took up of the second effect when it
+   was fitted alone, nor the second's fit to that. A refit is kept only when it lowers
+   chi-square; the named entry then carries the refitted parameters, its intervals at them
+   (given the other cause as it was then) and the values it was named with under
+   ``evidence.refit``. Its naming evidence and per-cause gain stay those of its round.
 6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,
    identifiability and which sensors would pin it:
    :mod:`orchestrator.inverse.uncertainty`); else ``none`` when the residual is at the
@@ -96,7 +104,8 @@ from orchestrator.inverse.diagnosis import Answer, Baseline, CauseFit, Diagnosis
 from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
-from orchestrator.inverse.selection import CONFIRM, FIT, Round, select, superposed_ranking
+from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFitter, Round, cause_stages, select,
+                                             superposed_ranking)
 from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, LOUD_FACTOR, MIN_SHARE, NONE_MARGIN, Evidence,
                                                assess, at_noise_level, locate, step_error)
 
@@ -311,6 +320,9 @@ class _Named:
     round: Round
     raw: dict
     preferred: list = field(default_factory=list)
+    refit: Evaluated | None = None       # step 5b: refitted with the other cause (None: not refitted / no better)
+    refit_fitter: CauseFitter | None = None
+    refit_from: float | None = None      # J of the extended model before this refit
 
 
 def _preferred(rd: Round, pick: Evaluated, tried: dict) -> list[Candidate]:
@@ -325,13 +337,14 @@ def _preferred(rd: Round, pick: Evaluated, tried: dict) -> list[Candidate]:
             if o.candidate.cause == pick.candidate.cause and tried[o.candidate].fails_only_share]
 
 
-def _rounds(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated) -> tuple[list[_Named], list[Round], dict]:
+def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> tuple[list[_Named], list[Round], dict]:
     """Steps 3-5: round 1 over all candidates, then forward selection (module doc).
 
     Output: the named causes (in order), the rounds, candidate -> evidence of every
     candidate tried for naming (per round: label keys ``round:label``).
     """
     named: list[_Named] = []
+    raw = ref_raw
     rounds = [select(pool, inp.target, raw, ref, 0, inp.cands)]
     evidence = {}
     while True:
@@ -349,7 +362,46 @@ def _rounds(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated) -> tuple[list[_
         if not nxt:
             break
         rounds.append(select(pool, inp.target, raw, pick, sum(n.e.k for n in named), nxt, SECOND_CONFIRM))
+    if len(named) == 2:
+        _backfit(pool, inp.target, ref_raw, ref, named)
     return named, rounds, evidence
+
+
+def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: list[_Named]) -> None:
+    """Step 5b: each named cause fitted again on the reference with the others at their latest values (module doc).
+
+    One pass, in the order named: all of a cause's parameters (the finest stage of
+    :func:`orchestrator.inverse.selection.cause_stages`) from its current values; each
+    start is the current extended model itself (no run needed to know its comparison).
+    A refit that lowers chi-square is kept: the cause's ``refit`` (and its fitter, for the
+    intervals), and the last cause's ``raw``, the extended model, takes the new values.
+    """
+    values = [n.e.values for n in named]
+    current = named[-1].e.cmp
+    for i, n in enumerate(named):
+        c = n.e.candidate
+        kind = kind_of(c)
+        raw = ref_raw
+        for j, m in enumerate(named):
+            if j != i:
+                raw = kind_of(m.e.candidate).apply(raw, m.e.candidate.sleeper, values[j])
+        start = Evaluated(c, values[i], current, n.e.k, "fitted")
+        fitter = CauseFitter(pool, target, raw, start, ref.cmp)
+        stages = cause_stages(kind)
+        pool.expect(FINE_MAX_NFEV * (stages[-1][0] + 1))
+        got = fitter.fit(start, slice(len(stages) - 1, None), FINE_MAX_NFEV)
+        if got.cmp.chi2 < current.chi2:
+            n.refit, n.refit_fitter, n.refit_from = got, fitter, current.objective
+            values[i], current = got.values, got.cmp
+            named[-1].raw = kind.apply(raw, c.sleeper, got.values)
+
+
+def _final(named: list[_Named], ref: Evaluated):
+    """The comparison of the extended model: the last refit (step 5b), else the last named cause's, else the reference's."""
+    for n in reversed(named):
+        if n.refit is not None:
+            return n.refit.cmp
+    return named[-1].e.cmp if named else ref.cmp
 
 
 def _second_round(target: Target, first: Round, named: list[_Named]) -> list[Candidate]:
@@ -401,9 +453,16 @@ def _named_entry(n: _Named, rnd: int, reach: tuple[int, int]) -> CauseFit:
         step = 1 if entry.sleeper == reach[1] else -1
         entry.ambiguity["open_beyond"] = (f"sleeper {entry.sleeper} is the outermost screened: the cause may as well "
                                           f"sit on sleeper {entry.sleeper + step} or further, not screened")
-    fitter = n.round.fitters.get(n.e.candidate)
+    fitter, values = n.round.fitters.get(n.e.candidate), n.e.values
+    if n.refit is not None:   # step 5b: the parameters (and their intervals) of the refit with the other cause
+        fitter, values = n.refit_fitter, n.refit.values
+        kind = kind_of(n.e.candidate)
+        entry.parameters = kind.parameters(values)
+        entry.evidence["refit"] = {"parameters_round": kind.parameters(n.e.values),
+                                   "objective_before": n.refit_from, "objective_after": n.refit.cmp.objective,
+                                   "reason": "refitted on the model with the other named cause"}
     if fitter is not None:
-        entry.uncertainty = cause_uncertainty(fitter, n.e.values, n.evidence.n_eff)
+        entry.uncertainty = cause_uncertainty(fitter, values, n.evidence.n_eff)
     return entry
 
 
@@ -531,7 +590,7 @@ def _result(inp: _Inputs, base: Evaluated, ref: Evaluated, ref_raw: dict, named:
     local = [c.sleeper for c in inp.cands if c.sleeper is not None]
     reach = (min(local), max(local)) if local else (-1, -1)
     named_entries = [_named_entry(n, i + 1, reach) for i, n in enumerate(named)]
-    final = named[-1].e.cmp if named else ref.cmp
+    final = _final(named, ref)
     first = rounds[0]
     best_ev = evidence.get((1, first.real[0].candidate)) if first.real else None
     answer = _answer(inp, ref, ref_raw, named_entries, final, best_ev, step_err)
