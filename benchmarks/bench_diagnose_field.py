@@ -643,10 +643,15 @@ def main() -> None:
         rows, wall = [json.loads(s) for s in (out / "rows.jsonl").read_text().splitlines() if s.strip()], None
         rows = rescored([r for r in rows if r["family"] in families], out)
     else:
-        rows = run_all(families, args.seeds, args.workers, out, args.stage)
+        fresh = run_all(families, args.seeds, args.workers, out, args.stage)
         wall = time.perf_counter() - t0
         if args.stage == "synth":
             return
+        seeds = {SEED0 + 101 * k for k in range(args.seeds)}
+        rows = [r for r in (json.loads(s) for s in (out / "rows.jsonl").read_text().splitlines() if s.strip())
+                if r["family"] in families and r["seed"] in seeds]   # a resumed run: the cases done before count
+        if len(rows) > len(fresh):
+            wall = None   # then the summary sums the diagnoses' own wall times
     detect = detect_all(out, families) if args.detectability else None
     text = summary(rows, args.seeds, wall, detect)
     print(text)

@@ -30,6 +30,7 @@ psutil = pytest.importorskip("psutil")
 from conftest import DEFAULT_SCENARIO  # noqa: E402
 
 from orchestrator.cosim.portable import FILES_DIR  # noqa: E402
+from orchestrator.cosim.scratch import remove_orphans  # noqa: E402
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario  # noqa: E402
 from orchestrator.inputs.sensor_layout import layout_of, resolve  # noqa: E402
 from orchestrator.inverse.diagnose import diagnose  # noqa: E402
@@ -240,7 +241,10 @@ def test_killing_the_sweep_leaves_no_worker_alive(tmp_path):
     speeds = ",".join(f"{30 + 0.1 * i:.1f}" for i in range(100))
     argv = [str(Path(sys.executable).with_name("turnout")), "sweep", str(base), "--vary", f"vehicle.speed={speeds}",
             "--workers", "2", "--out", str(tmp_path / "out"), "--no-progress"]
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    tmp = tmp_path / "tmp"   # the sweep's temporary folder: what the killed workers leave behind
+    tmp.mkdir()
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+                            env={**os.environ, "TMPDIR": str(tmp)})
     try:
         main = psutil.Process(proc.pid)
         workers: list = []
@@ -261,6 +265,12 @@ def test_killing_the_sweep_leaves_no_worker_alive(tmp_path):
         while _alive(everyone) and time.monotonic() < deadline:
             time.sleep(0.1)
         assert _alive(everyone) == []
+        # the killed workers' scratch folders (orchestrator.cosim.scratch; not the shared turnout-files cache)
+        # go with the next process's first one
+        left = sorted(p.name for p in tmp.glob("turnout-*-[0-9]*-*"))
+        removed = remove_orphans(str(tmp))
+        assert sorted(Path(p).name for p in removed) == left and not list(tmp.glob("turnout-*-[0-9]*-*")), \
+            (left, removed)
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -48,6 +48,7 @@ import numpy as np
 from orchestrator.cosim.algorithms import ALGORITHMS
 from orchestrator.cosim.compiled_loop import compiled_loop
 from orchestrator.cosim.passage import POSITION_TOL, check_passage, n_wheels, our_ports, start_position, vehicle_kind
+from orchestrator.cosim.scratch import scratch_dir
 from orchestrator.cosim.stats import CosimStats, RunCounters
 from orchestrator.cosim.units import CosimError, FmuTrack, FmuVehicle, InProcessTrack, InProcessVehicle
 from orchestrator.inputs.errors import UserInputError
@@ -281,8 +282,6 @@ class _Signals:
 def _set_up(scenario, backend: str, work_dir: Path | None, fmu_dir: Path | None, record_states: bool,
             algorithm: str, record_columns: dict | None = None) -> _Run:
     """The work folder, the time grid and the two units (timed); returns the :class:`_Run`."""
-    import tempfile
-
     from track.layout import build_layout
 
     sim = scenario.simulation
@@ -292,12 +291,12 @@ def _set_up(scenario, backend: str, work_dir: Path | None, fmu_dir: Path | None,
     layout = build_layout(scenario.track.layout)
     tmp = None
     if work_dir is None:
-        tmp = tempfile.TemporaryDirectory(prefix="turnout_")
+        tmp = scratch_dir("job")
         work_dir = Path(tmp.name)
     work_dir = Path(work_dir)
     work_dir.mkdir(parents=True, exist_ok=True)
     # the FMU's record never lands in work_dir (it may be a results folder): a private temporary folder
-    record_tmp = tempfile.TemporaryDirectory(prefix="turnout_record_") \
+    record_tmp = scratch_dir("record") \
         if record_states and backend == "fmu" else None
     step_fn = ALGORITHMS[algorithm].step
     t_wall = time.perf_counter()

@@ -45,16 +45,19 @@ def _unzipped(path: Path) -> str:
     the FMU's Python package was imported from it (pythonfmu), stays in ``sys.modules`` for the
     next instance of the same FMU, and may import a module of it later; so the next run reuses
     the folder. Removed by a ``multiprocessing`` finalizer, which runs at the exit of the main
-    process (atexit) and of pool workers (which skip atexit).
+    process (atexit) and of pool workers (which skip atexit); a killed process's by the next
+    process's first scratch folder (:mod:`orchestrator.cosim.scratch`).
     """
     from fmpy import extract
     from multiprocessing.util import Finalize
+
+    from orchestrator.cosim.scratch import make_scratch
 
     st = path.stat()
     key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
     folder = _UNZIPPED.get(key)
     if folder is None or not os.path.isdir(folder):
-        folder = extract(str(path))
+        folder = str(extract(str(path), unzipdir=make_scratch("fmu")))   # named: a killed process's is found
         Finalize(None, shutil.rmtree, args=(folder,), kwargs={"ignore_errors": True}, exitpriority=0)
         _UNZIPPED[key] = folder
     return folder

@@ -149,6 +149,15 @@ def _share(x) -> str:
     return "an undefined share" if x is None else f"{100 * x:.0f} %"
 
 
+def _refit_words(c) -> str:
+    """A named cause refitted with the other one (diagnose step 5b): from which values, and J before -> after."""
+    r = c.evidence.get("refit")
+    if not r:
+        return ""
+    return (f"; refitted on the model with the other cause (named at {_fmt(r['parameters_round'])}): the extended "
+            f"model's J {r['objective_before']:.4g} → {r['objective_after']:.4g}")
+
+
 def _verdict_lines(result: Diagnosis) -> list[str]:
     """The head: the verdict and its evidence in plain words."""
     a = result.answer
@@ -165,7 +174,7 @@ def _verdict_lines(result: Diagnosis) -> list[str]:
                           f"ΔBIC on {s.get('n_eff', 0):.0f} effective samples {s.get('delta_bic_eff', 0):.3g}"
                           + (f"; cannot be told apart from {', '.join(amb[1:])}" if len(amb) > 1 else "")
                           + (f"; {c.ambiguity['open_beyond']}" if (c.ambiguity or {}).get("open_beyond") else "")
-                          + "."]
+                          + _refit_words(c) + "."]
     else:
         lines.append(f"**{a.kind}**: {a.reason}.")
     if a.where:

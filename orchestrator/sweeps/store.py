@@ -31,12 +31,12 @@ import json
 import numbers
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 from orchestrator.cosim.portable import PortableScenario
+from orchestrator.cosim.scratch import scratch_dir
 from orchestrator.sweeps.plan import Run, SweepPlan
 
 __all__ = ["SweepStore", "RunJob", "RunOutput", "execute_run", "read_record", "table_rows", "cell_text",
@@ -44,7 +44,7 @@ __all__ = ["SweepStore", "RunJob", "RunOutput", "execute_run", "read_record", "t
 
 RUNS_DIR = "runs"  # OUT/runs/<run_id>/: one folder per run
 RESULT_FILE = "result.json"  # its presence marks a finished run
-WORK_PREFIX = "turnout-run-"  # a worker's run folder: <its temp folder>/turnout-run-XXXX/<run_id>
+WORK_PREFIX = "turnout-run-"  # a worker's run folder: <its temp folder>/turnout-run-<pid>-<host>-XXXX/<run_id>
 TABLE_FILE = "sweep.csv"
 INDEX_COLUMN, ID_COLUMN = "index", "run_id"  # the first two columns of sweep.csv
 
@@ -200,7 +200,7 @@ def execute_run(job: RunJob, run_fn: Callable | None) -> RunOutput:
             run_case as run_fn,  # imported here: tests and other studies pass their own
         )
     scenario = job.scenario.scenario()
-    with tempfile.TemporaryDirectory(prefix=WORK_PREFIX) as work:
+    with scratch_dir("run") as work:   # named by its process: a killed worker's is removed later
         folder = Path(work) / job.run_id
         folder.mkdir()
         returned = run_fn(scenario, folder)
