@@ -368,7 +368,7 @@ def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> tuple[li
 
 
 def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: list[_Named]) -> None:
-    """Step 5b: each named cause fitted again on the reference with the others at their latest values (module doc).
+    """Step 5b: each named cause fitted again on the reference with the other at its latest values (module doc).
 
     One pass, in the order named: all of a cause's parameters (the finest stage of
     :func:`orchestrator.inverse.selection.cause_stages`) from its current values; each
@@ -396,7 +396,7 @@ def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: l
             named[-1].raw = kind.apply(raw, c.sleeper, got.values)
 
 
-def _final(named: list[_Named], ref: Evaluated):
+def _final(named: list[_Named], ref: Evaluated) -> Comparison:
     """The comparison of the extended model: the last refit (step 5b), else the last named cause's, else the reference's."""
     for n in reversed(named):
         if n.refit is not None:
