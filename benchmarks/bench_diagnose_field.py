@@ -323,19 +323,28 @@ def rescored(rows: list[dict], out: Path) -> list[dict]:
     return new
 
 
+def case_seed(k: int) -> int:
+    """The seed of a family's k-th case."""
+    return SEED0 + 101 * k
+
+
+def read_rows(out: Path) -> list[dict]:
+    """The rows of ``out/rows.jsonl`` (none when it does not exist)."""
+    log = out / "rows.jsonl"
+    return [json.loads(s) for s in log.read_text().splitlines() if s.strip()] if log.is_file() else []
+
+
 def run_all(families, seeds: int, workers: int, out: Path, stage: str = "all") -> list[dict]:
     """Every family x seed, rows appended to ``out/rows.jsonl`` as they finish."""
     sc = load_scenario(SCENARIO)
     setup = (instrumented_sleepers(sc), tuple(layout_of(sc).ids))
     out.mkdir(parents=True, exist_ok=True)
-    log = out / "rows.jsonl"
     # a case already diagnosed in this folder is not run again (resumable; --seeds 3 after --seeds 1 adds two)
-    lines = log.read_text().splitlines() if log.is_file() and stage != "synth" else []
-    done = {(r["family"], r["seed"]) for r in map(json.loads, filter(str.strip, lines))}
+    done = {(r["family"], r["seed"]) for r in (read_rows(out) if stage != "synth" else [])}
     rows = []
     for k in range(seeds):
         for family in families:
-            seed = SEED0 + 101 * k
+            seed = case_seed(k)
             if (family, seed) in done:
                 continue
             row = run_case(sc, setup, family, seed, workers, out / f"{family}_{seed}", stage)
@@ -640,16 +649,15 @@ def main() -> None:
         raise SystemExit(f"unknown family {unknown[0]!r} (one of {', '.join({**FAMILIES, **SLOW_FAMILIES})})")
     out, t0 = Path(args.out), time.perf_counter()
     if args.report_only:
-        rows, wall = [json.loads(s) for s in (out / "rows.jsonl").read_text().splitlines() if s.strip()], None
+        rows, wall = read_rows(out), None
         rows = rescored([r for r in rows if r["family"] in families], out)
     else:
         fresh = run_all(families, args.seeds, args.workers, out, args.stage)
         wall = time.perf_counter() - t0
         if args.stage == "synth":
             return
-        seeds = {SEED0 + 101 * k for k in range(args.seeds)}
-        rows = [r for r in (json.loads(s) for s in (out / "rows.jsonl").read_text().splitlines() if s.strip())
-                if r["family"] in families and r["seed"] in seeds]   # a resumed run: the cases done before count
+        seeds = {case_seed(k) for k in range(args.seeds)}
+        rows = [r for r in read_rows(out) if r["family"] in families and r["seed"] in seeds]   # resumed: all count
         if len(rows) > len(fresh):
             wall = None   # then the summary sums the diagnoses' own wall times
     detect = detect_all(out, families) if args.detectability else None

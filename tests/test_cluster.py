@@ -268,6 +268,7 @@ def test_killing_the_sweep_leaves_no_worker_alive(tmp_path):
         # the killed workers' scratch folders (orchestrator.cosim.scratch; not the shared turnout-files cache)
         # go with the next process's first one
         left = sorted(p.name for p in tmp.glob("turnout-*-[0-9]*-*"))
+        assert left, "the workers were killed mid-run: their run folders must be there to remove"
         removed = remove_orphans(str(tmp))
         assert sorted(Path(p).name for p in removed) == left and not list(tmp.glob("turnout-*-[0-9]*-*")), \
             (left, removed)

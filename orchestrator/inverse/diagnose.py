@@ -59,7 +59,7 @@ module that applies it):
    the other at its latest values, first cause first — one pass of backfitting, so the
    extended model does not keep what the first cause took up of the second effect when it
    was fitted alone, nor the second's fit to that. A refit is kept only when it lowers
-   chi-square; the named entry then carries the refitted parameters, its intervals at them
+   both chi-square and J; the named entry then carries the refitted parameters, its intervals at them
    (given the other cause as it was then) and the values it was named with under
    ``evidence.refit``. Its naming evidence and per-cause gain stay those of its round.
 6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,
@@ -373,7 +373,7 @@ def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: l
     One pass, in the order named: all of a cause's parameters (the finest stage of
     :func:`orchestrator.inverse.selection.cause_stages`) from its current values; each
     start is the current extended model itself (no run needed to know its comparison).
-    A refit that lowers chi-square is kept: the cause's ``refit`` (and its fitter, for the
+    A refit that lowers both chi-square and J is kept: the cause's ``refit`` (and its fitter, for the
     intervals), and the last cause's ``raw``, the extended model, takes the new values.
     """
     values = [n.e.values for n in named]
@@ -390,7 +390,7 @@ def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: l
         stages = cause_stages(kind)
         pool.expect(FINE_MAX_NFEV * (stages[-1][0] + 1))
         got = fitter.fit(start, slice(len(stages) - 1, None), FINE_MAX_NFEV)
-        if got.cmp.chi2 < current.chi2:
+        if got.cmp.chi2 < current.chi2 and got.cmp.objective < current.objective:   # never a worse fit
             n.refit, n.refit_fitter, n.refit_from = got, fitter, current.objective
             values[i], current = got.values, got.cmp
             named[-1].raw = kind.apply(raw, c.sleeper, got.values)
