@@ -16,7 +16,14 @@ share one module.  So each FMU bundles its code as one package with a unique nam
     resources/<data files>                      e.g. track_fmu.json: the baked track parameters
                                                 and sensors
     resources/pythonfmu/                        added by pythonfmu
+    resources/.../__pycache__/*.<tag>.pyc       the bundled modules' bytecode (below)
     binaries/linux64/<ClassName>.so             pythonfmu's C wrapper
+
+Bytecode: a host unzips the FMU into a fresh folder, so without it every process that loads the
+FMU compiles the bundled sources again (~0.1 s for the track FMU; pythonfmu leaves ``__pycache__``
+out of the archive). The build adds the building Python's bytecode of each bundled module,
+hash-checked (PEP 552 ``CHECKED_HASH``: valid whatever the files' times after unzipping, and a
+changed source is compiled again); another Python version ignores them (its own cache tag).
 
 Slave modules import ``.base`` relatively and their model package with
 ``from . import vehicle`` (falling back to ``import vehicle`` in the source tree);
@@ -300,7 +307,34 @@ def _build(kind: str, dest: Path, resources: Mapping[str, bytes]) -> Path:
         shim = compile_shim(Path(tmp) / "shim")
         if shim is not None:
             _install_shim(dest, spec.class_name, shim)
+        _add_bytecode(dest, stage, Path(tmp) / "pyc")
     return dest
+
+
+def _add_bytecode(fmu: Path, stage: Path, work: Path) -> None:
+    """Append to ``fmu`` the hash-checked bytecode of the bundled package ``stage`` (a folder that
+    is ``resources/<stage.name>`` in the FMU) and of pythonfmu's bundled modules, at the paths the
+    import system looks for (``<folder>/__pycache__/<module>.<cache tag>.pyc``)."""
+    import py_compile
+
+    import pythonfmu
+
+    if sys.implementation.cache_tag is None:   # an interpreter without bytecode caching
+        return
+    sources = [(path, Path("resources") / stage.name / path.relative_to(stage)) for path in sorted(stage.rglob("*.py"))]
+    pfmu = Path(pythonfmu.__file__).parent
+    sources += [(path, Path("resources") / "pythonfmu" / path.name) for path in sorted(pfmu.glob("*.py"))]
+    with zipfile.ZipFile(fmu) as zf:
+        present = set(zf.namelist())
+    with zipfile.ZipFile(fmu, "a", zipfile.ZIP_DEFLATED) as zf:
+        for source, arc in sources:
+            if arc.as_posix() not in present:   # only a module the FMU holds as source
+                continue
+            arc_pyc = arc.parent / "__pycache__" / f"{arc.stem}.{sys.implementation.cache_tag}.pyc"
+            target = work / arc_pyc
+            py_compile.compile(str(source), cfile=str(target), dfile=arc.as_posix(), doraise=True,
+                               invalidation_mode=py_compile.PycInvalidationMode.CHECKED_HASH)
+            zf.write(target, arc_pyc.as_posix())
 
 
 # ------------------------------------------------------------------ self-contained loading

@@ -109,6 +109,35 @@ def test_fmpy_validation_reports_no_problems(fmu_files, kind):
     assert validate_fmu(str(fmu_files[kind][0])) == []
 
 
+def test_bundled_modules_load_from_their_bytecode(fmu_files):
+    """Every bundled module of the FMU has its hash-checked bytecode in the archive (fmus.build,
+    module docstring), and importing the unzipped package compiles none of the bundled sources
+    (checked in a fresh interpreter, counting calls of the import system's compile step). On the
+    old build each of these modules was compiled again in every process that loaded the FMU."""
+    import subprocess
+    import zipfile
+
+    path, unzipped = fmu_files["bogie"]
+    names = set(zipfile.ZipFile(path).namelist())
+    sources = [n for n in names if n.endswith(".py") and n.count("/") >= 2]   # in a package below resources/
+    assert sources
+    tag = sys.implementation.cache_tag
+    missing = [n for n in sources
+               if "{}/__pycache__/{}.{}.pyc".format(n.rsplit("/", 1)[0], n.rsplit("/", 1)[1][:-3], tag) not in names]
+    assert not missing, missing
+    package = next(n.split("/")[1] for n in sources if n.split("/")[1].startswith("xpanel_"))
+    probe = ("import importlib, importlib._bootstrap_external as be, sys\n"
+             "seen = []\n"
+             "orig = be.SourceLoader.source_to_code\n"
+             "be.SourceLoader.source_to_code = lambda self, data, path, *a, **k: (seen.append(path), "
+             "orig(self, data, path, *a, **k))[1]\n"
+             f"importlib.import_module('{package}.vehicle_fmus')\n"
+             "print([p for p in seen if '{0}' in p])\n".format(package))
+    out = subprocess.run([sys.executable, "-c", probe], cwd=str(unzipped) + "/resources", capture_output=True,
+                         text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_model_description_ports_units_and_capabilities(fmu_files, kind):
     md = read_model_description(str(fmu_files[kind][0]))

@@ -12,8 +12,8 @@ module that applies it):
    vehicle parameters, track damping and per-channel sensor gains are fitted first
    (:func:`_nuisance`); the causes are then screened and fitted on that model and the
    nuisance estimates are reported apart, never as a track cause. Then the model's own
-   time-step error (:func:`_step_error`: the reference at half its step, one run),
-   reported where a residual above the noise lives.
+   time-step error (:func:`_step_error`: the reference at half its step, one run, which runs
+   beside the screening), reported where a residual above the noise lives.
 3. **Selection, round 1** (:func:`orchestrator.inverse.selection.select`): every
    candidate of the catalogue (each local cause on the sleepers carrying sensors and
    :data:`SENSOR_REACH` beyond them, the global ones) screened at the magnitudes of its
@@ -94,6 +94,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -271,22 +272,27 @@ def _nuisance(pool: Pool, inp: _Inputs, base: Evaluated) -> tuple[dict, Evaluate
     return nz.raw, Evaluated(Candidate("none"), np.zeros(0), nz.cmp, 0, "nominal"), nz.to_json()
 
 
-def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> dict | None:
+def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> Callable[[], dict | None]:
     """Step 2b: the model's own time-step error (:func:`orchestrator.inverse.significance.step_error`).
 
-    One run: the reference at half its time step (same output step). Output: the step
-    error's JSON (``step`` [s], ``objective``, ``groups``, ``channels``) or None when that run
-    cannot be compared (dropped with its reason).
+    One run: the reference at half its time step (same output step), started now and waited for
+    when the answer needs it (the function returned), so that it runs beside the screening.
+    Output of that function: the step error's JSON (``step`` [s], ``objective``, ``groups``,
+    ``channels``) or None when that run cannot be compared (dropped with its reason).
     """
     fine_raw = copy.deepcopy(ref_raw)
     fine_raw["simulation"]["step"] = 0.5 * float(ref_raw["simulation"]["step"])
     pool.expect(1)
-    run = pool.map([fine_raw])[0]
-    cmp, why = checked_comparison(inp.target, run, ref.cmp)
-    if cmp is None:
-        pool.drop("the reference at half its time step", "step error", why)
-        return None
-    return {"step": float(ref_raw["simulation"]["step"]), **step_error(ref.cmp, cmp, inp.target)}
+    pending = pool.submit([fine_raw])
+
+    def result() -> dict | None:
+        cmp, why = checked_comparison(inp.target, pending()[0], ref.cmp)
+        if cmp is None:
+            pool.drop("the reference at half its time step", "step error", why)
+            return None
+        return {"step": float(ref_raw["simulation"]["step"]), **step_error(ref.cmp, cmp, inp.target)}
+
+    return result
 
 
 def _pick(rd: Round, target: Target) -> tuple[Evaluated | None, Evidence | None, dict]:
@@ -640,13 +646,13 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
     try:
         base, baseline = _baseline(pool, inp)
         ref_raw, ref, nuisance = _nuisance(pool, inp, base)
-        step_err = _step_error(pool, inp, ref_raw, ref)
+        step_err = _step_error(pool, inp, ref_raw, ref)   # waited for in _result
         named, rounds, evidence = _rounds(pool, inp, ref_raw, ref)
         ext_raw = named[-1].raw if named else ref_raw
         ext_path = _extend(inp, ext_raw)
         validation = _validate(pool, inp, ext_raw)
         # inside the pool's lifetime: a named cause's intervals may need Jacobian runs not yet done
-        answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence, step_err)
+        answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence, step_err())
         result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance, causes, legacy,
                            ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
                            time.perf_counter() - t_start, _settings(inp.cands),

@@ -123,20 +123,31 @@ class Pool:
         with ``then``, ``then(run)`` of each instead, computed here as each run arrives, while the
         later runs still go on (a comparison with the measurement: ~20 ms a run that the workers
         no longer wait for after a batch, e.g. 2 s after the 96 screening runs)."""
+        return self.submit(raws, then)()
+
+    def submit(self, raws: list[dict], then: Callable | None = None) -> Callable[[], list]:
+        """Start the runs of ``raws`` now and return at once a function that waits for them and gives
+        what :meth:`map` gives (call it once). The runs share the workers with whatever is asked for
+        before the function is called: a run whose answer is needed only later (the step error's)
+        no longer leaves the other workers idle while it runs alone."""
         from orchestrator.cosim.portable import PortableScenario
         from orchestrator.cosim.sensing import sensors_job
 
-        t0 = time.perf_counter()
         futures = [self.executor.submit(sensors_job, PortableScenario.of(raw, self.source)) for raw in raws]
-        out = []
-        for f in futures:
-            run = f.result()
-            out.append(run if then is None else then(run))
-            if self.bar is not None:
-                self.bar.update(1)
-        self.runs += len(raws)
-        self.wall += time.perf_counter() - t0
-        return out
+
+        def collect() -> list:
+            t0 = time.perf_counter()
+            out = []
+            for f in futures:
+                run = f.result()
+                out.append(run if then is None else then(run))
+                if self.bar is not None:
+                    self.bar.update(1)
+            self.runs += len(raws)
+            self.wall += time.perf_counter() - t0
+            return out
+
+        return collect
 
 
 def scalar_axis(kind, raw: dict, sleeper, grid: tuple | None = None) -> tuple[np.ndarray, float]:

@@ -6,9 +6,10 @@ next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of
 
 1. :func:`_screen`: every candidate at the magnitudes of its screening grid (one batch),
    a void also as the two one-sided wedges (its :meth:`~orchestrator.inputs.causes.CauseKind.screen_proxies`);
-2. :func:`_search`: each candidate's best magnitude by the dense 1-D search between its
+2. :func:`_search_one`: each candidate's best magnitude by the dense 1-D search between its
    screening runs (:func:`orchestrator.inverse.screening.dense_search`, no runs), of its
-   best-fitting proxy;
+   best-fitting proxy — done as soon as the candidate's last screening run is in, while the
+   batch goes on;
 3. :func:`_confirm`: the :data:`CONFIRM` best re-run at their best magnitude;
 4. :func:`_coarse_fits`, :func:`_fine_fits`: bounded least squares (:class:`CauseFitter`;
    a void first as a wedge, :func:`cause_stages`, started from its screened profile (uniform gap or wedge)
@@ -226,34 +227,46 @@ def _axes(kind, raw: dict, sleeper) -> list[tuple[np.ndarray | None, np.ndarray,
             for i, (prof, grid) in enumerate(kind.screen_proxies())]
 
 
-def _screen(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, axes: dict) -> dict:
-    """Step 2, runs: candidate -> per proxy, magnitude -> signals on the measured base (failed variants left out)."""
+def _screen(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, axes: dict) -> tuple[dict, dict]:
+    """Step 2: the screening runs, and each candidate's dense search (:func:`_search_one`) as soon as its
+    last run is in, while the later candidates' runs go on (the searches took ~2.5 s of an idle pool
+    after the 96 runs of the default diagnosis). Failed variants are left out.
+
+    Returns (candidate -> its screened evaluation, candidate -> the best proxy's magnitude -> signals),
+    as :func:`_search_one` gives them (candidates with < 2 magnitudes left out)."""
     jobs = [(c, i, x) for c in cands for i, (_, xs, x0) in enumerate(axes[c]) for x in xs if abs(x - x0) > 1e-12]
-    got = pool.map([kind_of(c).apply_scalar(raw, c.sleeper, x, axes[c][i][0]) for c, i, x in jobs],
-                   then=lambda run: checked_comparison(target, run, ref.cmp))
+    left = {c: sum(1 for j in jobs if j[0] == c) for c in cands}
     screened = {c: [{x0: ref.cmp.simulated} for _, _, x0 in axes[c]] for c in cands}
-    for (c, i, x), (cmp, why) in zip(jobs, got):
+    dense, grids = {}, {}
+
+    def arrived(job, run) -> None:
+        c, i, x = job
+        cmp, why = checked_comparison(target, run, ref.cmp)
         if cmp is None:
             pool.drop(f"{c.label} at {x:.6g}" + ("" if i == 0 else f" (screening shape {i})"), "screening", why)
         else:
             screened[c][i][x] = cmp.simulated
-    return screened
+        left[c] -= 1
+        if left[c] == 0:
+            _search_one(target, c, axes[c], screened[c], dense, grids)
+
+    it = iter(jobs)   # pool.map hands the runs over in the order of the jobs
+    pool.map([kind_of(c).apply_scalar(raw, c.sleeper, x, axes[c][i][0]) for c, i, x in jobs],
+             then=lambda run: arrived(next(it), run))
+    return {c: dense[c] for c in cands if c in dense}, {c: grids[c] for c in cands if c in grids}
 
 
-def _search(target: Target, cands: list, axes: dict, screened: dict) -> tuple[dict, dict]:
-    """Step 2, no runs: candidate -> its ``screened`` evaluation at the best magnitude of its best-fitting
-    proxy, and candidate -> that proxy's magnitude -> signals (candidates with < 2 magnitudes left out)."""
-    dense, grids = {}, {}
-    for c in cands:
-        for (profile, _, _), grid in zip(axes[c], screened[c]):
-            xs = np.array(sorted(grid))
-            if xs.size < 2:
-                continue
-            x_best, cmp = dense_search(target, kind_of(c), xs, [grid[x] for x in xs])
-            if c not in dense or cmp.chi2 < dense[c].cmp.chi2:
-                dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best, profile), cmp, 1, "screened")
-                grids[c] = grid
-    return dense, grids
+def _search_one(target: Target, c, axes_c: list, screened_c: list, dense: dict, grids: dict) -> None:
+    """Step 2, no runs: into ``dense[c]`` candidate ``c``'s evaluation at the best magnitude of its
+    best-fitting proxy, into ``grids[c]`` that proxy's magnitude -> signals (nothing with < 2 magnitudes)."""
+    for (profile, _, _), grid in zip(axes_c, screened_c):
+        xs = np.array(sorted(grid))
+        if xs.size < 2:
+            continue
+        x_best, cmp = dense_search(target, kind_of(c), xs, [grid[x] for x in xs])
+        if c not in dense or cmp.chi2 < dense[c].cmp.chi2:
+            dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best, profile), cmp, 1, "screened")
+            grids[c] = grid
 
 
 def _confirm(pool: Pool, target: Target, raw: dict, ref: Evaluated, dense: dict, confirm: int) -> dict:
@@ -317,8 +330,7 @@ def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, ca
     """
     axes = {c: _axes(kind_of(c), raw, c.sleeper) for c in cands}
     pool.expect(sum(len(xs) - 1 for c in cands for _, xs, _ in axes[c]))
-    screened = _screen(pool, target, raw, ref, cands, axes)
-    dense, grids = _search(target, cands, axes, screened)
+    dense, grids = _screen(pool, target, raw, ref, cands, axes)
     confirmed = _confirm(pool, target, raw, ref, dense, confirm)
     fitted, fitters = _fits(pool, target, raw, ref, confirmed)
     rd = _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)

@@ -186,19 +186,13 @@ def _assemble_beam(name: str, s: np.ndarray, profile: BeamProfile, empty: tuple 
     mid = 0.5 * (s[:-1] + s[1:])
     A, I = profile.at(mid)
     ne = s.size - 1
-    Ke = np.empty((ne, 4, 4))
-    Me = np.empty((ne, 4, 4))
-    phi = np.empty(ne)
     void = np.zeros(ne, bool)
     for s0, s1 in empty:
         void |= (mid > s0) & (mid < s1)
-    for e in range(ne):
-        if void[e]:
-            Ke[e], Me[e], phi[e] = 0.0, 0.0, 0.0
-            continue
-        L = s[e + 1] - s[e]
-        Ke[e], Me[e] = timoshenko_matrices(L, base.E, base.G, A[e], I[e], base.rho, base.kappa)
-        phi[e] = shear_parameter(L, base.E, base.G, A[e], I[e], base.kappa)
+    L = np.diff(s)
+    Ke, Me = timoshenko_matrices(L, base.E, base.G, A, I, base.rho, base.kappa)
+    phi = shear_parameter(L, base.E, base.G, A, I, base.kappa)
+    Ke[void], Me[void], phi[void] = 0.0, 0.0, 0.0   # the gap of a split position: no material
     idx = 2 * np.arange(ne)[:, None] + np.arange(4)[None, :]
     rows = np.repeat(idx, 4, axis=1).ravel()
     cols = np.tile(idx, (1, 4)).ravel()
