@@ -107,6 +107,10 @@ def test_a_point_run_ahead_waits_until_asked_for(monkeypatch):
         def drop(self, variant, stage, reason):
             self.dropped.append(reason)
 
+        def count(self, **increments):
+            for name, value in increments.items():
+                setattr(self, name, getattr(self, name) + value)
+
     pool = Pool()
     start = Evaluated(SimpleNamespace(label="stand-in", sleeper=None), np.array([0.5]), SimpleNamespace(chi2=0.5),
                       1, "confirmed")
@@ -120,3 +124,25 @@ def test_a_point_run_ahead_waits_until_asked_for(monkeypatch):
     assert pool.rounds == [3] and pool.ahead_used == 1 and pool.dropped == ["diverged"]   # no second run
     fitter.runs([u3])
     assert pool.rounds == [3] and pool.ahead_used == 2 and np.array_equal(fitter.best(), u3)
+
+
+def test_fits_side_by_side_overlap_and_keep_their_order():
+    """selection.side_by_side: with a spare worker the fits run at the same time (two calls that each
+    wait for the other pass a two-party barrier, which one after another would time out on), the
+    results come back in the calls' order; without a spare worker they run one after another, in order."""
+    import threading
+
+    from orchestrator.inverse.selection import side_by_side
+
+    barrier = threading.Barrier(2, timeout=10)
+    order = []
+
+    def fit(name):
+        order.append(name)
+        return name, barrier.wait()
+
+    got = side_by_side(SimpleNamespace(spare=1), {"b": lambda: fit("b"), "a": lambda: fit("a")})
+    assert list(got) == ["b", "a"] and {got["a"][1], got["b"][1]} == {0, 1}
+    order.clear()
+    got = side_by_side(SimpleNamespace(spare=0), {"b": lambda: order.append("b") or 2, "a": lambda: order.append("a") or 1})
+    assert got == {"b": 2, "a": 1} and order == ["b", "a"]

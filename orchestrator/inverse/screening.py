@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -96,6 +97,9 @@ class Pool:
         (:func:`orchestrator.inverse.fitting.fit_unit_cube`).
     ahead_runs, ahead_used : int
         Runs made ahead of being asked for, and those of them a fit then asked for.
+    lock : threading.Lock
+        Guards the counters and the progress bar: fits of different candidates may use the pool
+        side by side, each from its own thread (:func:`orchestrator.inverse.selection.side_by_side`).
     """
 
     executor: object
@@ -107,6 +111,13 @@ class Pool:
     spare: int = 0
     ahead_runs: int = 0
     ahead_used: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
+
+    def count(self, **increments: int) -> None:
+        """Add to the counters (``runs``, ``ahead_runs``, ``ahead_used``) under :attr:`lock`."""
+        with self.lock:
+            for name, value in increments.items():
+                setattr(self, name, getattr(self, name) + value)
 
     def drop(self, variant: str, stage: str, reason: str) -> None:
         """Record (and log) a variant left out of the diagnosis and why."""
@@ -116,7 +127,8 @@ class Pool:
     def expect(self, n: int) -> None:
         """Announce ``n`` more runs to the progress bar."""
         if self.bar is not None:
-            self.bar.total += n
+            with self.lock:
+                self.bar.total += n
 
     def map(self, raws: list[dict], then: Callable | None = None) -> list:
         """The runs of ``raws`` (validated raw scenario dicts, file paths absolute), in their order;
@@ -142,9 +154,11 @@ class Pool:
                 run = f.result()
                 out.append(run if then is None else then(run))
                 if self.bar is not None:
-                    self.bar.update(1)
-            self.runs += len(raws)
-            self.wall += time.perf_counter() - t0
+                    with self.lock:
+                        self.bar.update(1)
+            with self.lock:
+                self.runs += len(raws)
+                self.wall += time.perf_counter() - t0   # fits side by side: their waits add up
             return out
 
         return collect

@@ -15,7 +15,8 @@ next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of
    a void first as a wedge, :func:`cause_stages`, started from its screened profile (uniform gap or wedge)
    or a one-sided wedge, whichever fits better, and from the next of them when the fit cannot leave
    that start: a hanging sleeper has no gradient), all parameters of the best and of
-   up to :data:`FIT` - 1 runners-up within a chi-square factor :data:`FIT_RATIO`;
+   up to :data:`FIT` - 1 runners-up within a chi-square factor :data:`FIT_RATIO`; the candidates' fits
+   of a stage run side by side (:func:`side_by_side`, same results as one after another);
 5. :func:`_rank`: the fitted and confirmed candidates by their BIC on the effective
    sample size (:func:`orchestrator.inverse.significance.bic_eff`, N_eff of the best
    one's residual for all of them, so they compare like with like), and who cannot be
@@ -29,6 +30,7 @@ trust region steps away from it.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Sequence
 
 import numpy as np
@@ -103,11 +105,11 @@ class CauseFitter:
         if todo:
             out = self.pool.map([kind.apply(self.raw, c.sleeper, kind.from_unit(u)) for u in todo],
                                 then=lambda run: checked_comparison(self.target, run, self.reference))
-            self.pool.ahead_runs += len(extra)
+            self.pool.count(ahead_runs=len(extra))
             got = {u.tobytes(): cw for u, cw in zip(todo, out)}
         for b, u in asked.items():   # in the order asked, whether run now or ahead
             if b in self.ahead:
-                self.pool.ahead_used += 1
+                self.pool.count(ahead_used=1)
             self._keep(u, *(self.ahead.pop(b) if b in self.ahead else got[b]))
         for b in extra:
             self.ahead[b] = got[b]
@@ -292,17 +294,36 @@ def _fits(pool: Pool, target: Target, raw: dict, ref: Evaluated, confirmed: dict
     fitters = {c: CauseFitter(pool, target, raw, e, ref.cmp) for c, e in confirmed.items()}
     for c in confirmed:
         pool.expect(FIT_MAX_NFEV * (cause_stages(kind_of(c))[0][0] + 1))
-    fitted = {c: fitters[c].fit(confirmed[c], slice(0, 1), FIT_MAX_NFEV) for c in confirmed}
+    fitted = side_by_side(pool, {c: partial(fitters[c].fit, confirmed[c], slice(0, 1), FIT_MAX_NFEV)
+                                 for c in confirmed})
     if not fitted:
         return fitted, fitters
     by_fit = sorted(fitted, key=lambda c: fitted[c].cmp.chi2)
     lead = fitted[by_fit[0]].cmp.chi2
+    fine = {}
     for c in [c for c in by_fit if fitted[c].cmp.chi2 <= FIT_RATIO * lead][:FIT]:
         stages = cause_stages(kind_of(c))
         if len(stages) > 1:
             pool.expect(FINE_MAX_NFEV * sum(n + 1 for n, _ in stages[1:]))
-            fitted[c] = fitters[c].fit(fitted[c], slice(1, None), FINE_MAX_NFEV)
+            fine[c] = partial(fitters[c].fit, fitted[c], slice(1, None), FINE_MAX_NFEV)
+    fitted.update(side_by_side(pool, fine))
     return fitted, fitters
+
+
+def side_by_side(pool: Pool, calls: dict) -> dict:
+    """``{key: call()}`` of independent fits, each in its own thread when the pool has more than one
+    worker, so that one fit's runs fill the workers another's leaves idle: a least-squares iteration
+    is a trial point and then its Jacobian, a batch of one run and one of n, and a batch of one left
+    the second of two workers idle for ~30 % of a diagnosis. Each fit asks for the same points
+    whatever the others do (its own :class:`CauseFitter` and cache), so the results are those of the
+    fits one after another; only their runs' order on the workers changes. In ``calls``' order."""
+    if pool.spare < 1 or len(calls) < 2:
+        return {k: call() for k, call in calls.items()}
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(len(calls), thread_name_prefix="fit") as threads:
+        futures = {k: threads.submit(call) for k, call in calls.items()}
+        return {k: f.result() for k, f in futures.items()}
 
 
 def _rank(target: Target, ref: Evaluated, k_ref: int, dense: dict, confirmed: dict, fitted: dict,
