@@ -321,9 +321,12 @@ def side_by_side(pool: Pool, calls: dict) -> dict:
         return {k: call() for k, call in calls.items()}
     from concurrent.futures import ThreadPoolExecutor
 
-    with ThreadPoolExecutor(len(calls), thread_name_prefix="fit") as threads:
-        futures = {k: threads.submit(call) for k, call in calls.items()}
+    threads = ThreadPoolExecutor(len(calls), thread_name_prefix="fit")
+    futures = {k: threads.submit(call) for k, call in calls.items()}
+    try:
         return {k: f.result() for k, f in futures.items()}
+    finally:   # not waited for on an error or ^C: the caller shuts the pool down, the fits end at their next run
+        threads.shutdown(wait=False)
 
 
 def _rank(target: Target, ref: Evaluated, k_ref: int, dense: dict, confirmed: dict, fitted: dict,
