@@ -313,10 +313,12 @@ def _fits(pool: Pool, target: Target, raw: dict, ref: Evaluated, confirmed: dict
 def side_by_side(pool: Pool, calls: dict) -> dict:
     """``{key: call()}`` of independent fits, each in its own thread when the pool has more than one
     worker, so that one fit's runs fill the workers another's leaves idle: a least-squares iteration
-    is a trial point and then its Jacobian, a batch of one run and one of n, and a batch of one left
-    the second of two workers idle for ~30 % of a diagnosis. Each fit asks for the same points
-    whatever the others do (its own :class:`CauseFitter` and cache), so the results are those of the
-    fits one after another; only their runs' order on the workers changes. In ``calls``' order."""
+    is a trial point and then its Jacobian, a batch of one run and one of n, and a batch of one run
+    leaves the second of two workers idle (30 such batches, most of them in the fits, took 17 s of the
+    default diagnosis's 90 s). Each fit asks for the same points whatever the others do (its own
+    :class:`CauseFitter` and cache), so the results are those of the fits one after another; only
+    their runs' order on the workers changes (and the order in which their failed points enter
+    ``pool.dropped``). In ``calls``' order."""
     if pool.spare < 1 or len(calls) < 2:
         return {k: call() for k, call in calls.items()}
     from concurrent.futures import ThreadPoolExecutor
