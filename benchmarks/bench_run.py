@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -61,6 +62,9 @@ def main() -> None:
     ap.add_argument("--save-states", action="store_true", help="also measure runs with --save-states")
     args = ap.parse_args()
     cases = [(b, False) for b in ("fmu", "inprocess")] + ([("fmu", True)] if args.save_states else [])
+    if os.environ.get("PYTHONDONTWRITEBYTECODE"):   # README "Notes / known limitations"
+        print("note: PYTHONDONTWRITEBYTECODE is set: each run compiles the checkout's modules again "
+              "(~0.1 s that a Python keeping its bytecode does not pay)")
     with tempfile.TemporaryDirectory(prefix="bench_run_") as tmp:
         for backend, states in cases:
             fig = measure(backend, Path(tmp) / f"{backend}{'_states' if states else ''}", states)
