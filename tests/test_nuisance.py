@@ -226,3 +226,23 @@ def test_a_gain_must_explain_its_channel_and_reconstructed_displacements_do_not_
     assert abs(lg["P3"]) > GAIN_MIN and abs(lg["P3"] - np.median([lg[k] for k in ("P1", "P2", "P4")])) > 0.1
     assert loudness(meas["P3"] - np.exp(lg["P3"]) * sim["P3"]) > LOUD_FACTOR
     assert gains == {}, gains
+
+
+def test_refit_accepted_moves_only_the_free_entries_to_their_optimum():
+    """nuisance.refit_accepted on a linear residual with a closed-form optimum: the free entries (an
+    accepted value and the shift) reach the least-squares point with the held entry (a refused value,
+    at nominal) fixed — a + 0.5 (b - 0.5) = 0.7 at b = 0.5 gives a = 0.7, and the shift 0.4 —, the held
+    entry keeps its value to the last bit. Tolerance 0.02 in the unit cube: the refit has the stage's
+    :data:`FIT_MAX_NFEV` (4) trust-region iterations, not a run to convergence, and from a start 0.5
+    away they end at 0.693 (measured); a start already at the optimum is returned unchanged."""
+    from orchestrator.inverse.nuisance import refit_accepted
+
+    def residuals(ps):
+        return [np.array([p[0] - 0.7 + 0.5 * (p[1] - 0.5), 2.0 * (p[2] - 0.4), p[1] - 0.99]) for p in ps]
+
+    free = np.array([True, False, True])
+    got = refit_accepted(residuals, np.array([0.2, 0.5, 0.5]), free)
+    assert got[1] == 0.5
+    assert abs(got[0] - 0.7) < 0.02 and abs(got[2] - 0.4) < 0.02, got
+    best = np.array([0.7, 0.5, 0.4])
+    assert np.array_equal(refit_accepted(residuals, best, free), best)
