@@ -80,11 +80,12 @@ catalogue's causes are screened:
    chi-square and J. When they do not — they were fitted beside refused values pressed against
    their box's edge, and back at nominal those no longer hold them — the accepted values and the
    shift are fitted again alone, the refused ones at nominal (:func:`refit_accepted`), and kept if
-   that lowers both and leaves no accepted value at the box's edge; else all stay nominal. Measured
-   (session 15, field-like matrix): the old "all stay nominal" struck 4 of 51 diagnoses, 3 of them
-   among the answers with a low gain — a true stiff pad under a vehicle 10 % lighter and pads 57 %
-   more damped answered `unexplained`, with the pads' damping interval [36k, 49k] N s/m excluding the
-   nominal 20k that the fit then fell back to. The refined speed and shift are kept only
+   that lowers both and leaves no accepted value at the box's edge (the reported intervals stay the
+   joint fit's); else all stay nominal. Measured (session 15, field-like matrix): the old "all stay
+   nominal" struck 9 of 51 diagnoses; in one, a true stiff pad under a vehicle 10 % lighter and pads
+   57 % more damped answered `unexplained`, with the pads' damping interval [36k, 49k] N s/m excluding
+   the nominal 20k that the fit then fell back to — with the refit the pad is named; the other 8
+   answer as before (the refit kept in one, rejected in 7). The refined speed and shift are kept only
    with an accepted vehicle or damping value (measured: alone, the shift moved to soak
    up a void's misfit and raised J by 0.7 %).
 
