@@ -484,11 +484,16 @@ class _Runs:
         return [self.target.weighted_residuals(c) for c in self.comparisons(us)]
 
 
+def _at_edge(u: np.ndarray) -> np.ndarray:
+    """Which unit-cube values are pressed against the box's edge (within :data:`EDGE` of it)."""
+    return (u < EDGE) | (u > 1.0 - EDGE)
+
+
 def _accepted(box: _Box, u: np.ndarray, lo: np.ndarray, hi: np.ndarray, notes: list) -> np.ndarray:
     """Which box parameters are accepted (module doc): identifiable, not pressed against the box's edge,
     and the 90 % interval reaching into the prior."""
     ident = (hi - lo)[:-1] < IDENT_SHARE / BOX_WIDEN
-    at_edge = (u[:-1] < EDGE) | (u[:-1] > 1.0 - EDGE)
+    at_edge = _at_edge(u[:-1])
     outside = (box.values(lo[:-1]) > box.prior_hi) | (box.values(hi[:-1]) < box.prior_lo)
     for name, i, e, o in zip(box.names, ident, at_edge, outside):
         if e or o:
@@ -532,7 +537,7 @@ def fit_vehicle_and_damping(pool, target: Target, raw: dict, start: Comparison, 
             u_sub = refit_accepted(rn.residuals, u_final, np.append(keep, True))
             cmp_sub = rn.comparisons([u_sub])[0]
             if (cmp_sub.chi2 < start.chi2 and cmp_sub.objective <= start.objective
-                    and not ((u_sub[:-1] < EDGE) | (u_sub[:-1] > 1.0 - EDGE))[keep].any()):
+                    and not _at_edge(u_sub[:-1])[keep].any()):
                 notes.append("vehicle/damping: the accepted values, fitted beside the refused ones, did not lower "
                              "both chi-square and J; fitted again with the refused ones at nominal, they do: kept")
                 u_final, cmp = u_sub, cmp_sub

@@ -113,8 +113,8 @@ class Pool:
     ahead_used: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
-    def count(self, **increments: int) -> None:
-        """Add to the counters (``runs``, ``ahead_runs``, ``ahead_used``) under :attr:`lock`."""
+    def count(self, **increments: float) -> None:
+        """Add to the counters (``runs``, ``wall``, ``ahead_runs``, ``ahead_used``) under :attr:`lock`."""
         with self.lock:
             for name, value in increments.items():
                 setattr(self, name, getattr(self, name) + value)
@@ -156,9 +156,7 @@ class Pool:
                 if self.bar is not None:
                     with self.lock:
                         self.bar.update(1)
-            with self.lock:
-                self.runs += len(raws)
-                self.wall += time.perf_counter() - t0   # fits side by side: their waits add up
+            self.count(runs=len(raws), wall=time.perf_counter() - t0)   # fits side by side: their waits add up
             return out
 
         return collect
