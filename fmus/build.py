@@ -10,7 +10,7 @@ share one module.  So each FMU bundles its code as one package with a unique nam
 
     resources/xpanel_<kind>_<hash>_slave.py     entry script: imports the slave class
     resources/xpanel_<kind>_<hash>/__init__.py
-                                  /base.py      copy of fmus/base.py
+                                  /base.py      copy of fmus/base.py (fast.py: of fmus/fast.py)
                                   /<module>.py  copy of the slave module, e.g. vehicle_fmus.py
                                   /<package>/   copy of src/<package>, e.g. vehicle/
     resources/<data files>                      e.g. track_fmu.json: the baked track parameters
@@ -162,7 +162,8 @@ def _package_dir(package: str) -> Path:
 
 def _payload(spec: FmuKind) -> Dict[str, Path]:
     """Files to bundle: relative path inside the unique package -> source file."""
-    files = {"base.py": FMUS_DIR / "base.py", f"{spec.module}.py": FMUS_DIR / f"{spec.module}.py"}
+    files = {"base.py": FMUS_DIR / "base.py", "fast.py": FMUS_DIR / "fast.py",
+             f"{spec.module}.py": FMUS_DIR / f"{spec.module}.py"}
     for package in spec.packages:
         root = _package_dir(package)
         for path in sorted(root.rglob("*.py")):

@@ -43,8 +43,18 @@ front wheelset left, right, then the next:
   The record is preallocated for the host's stop time (``setupExperiment``) when it gives
   one, and written to the file without a copy.
 * outputs, monitoring: the integrator's work counters ``track_steps``, ``linear_solves``,
-  ``contact_iterations``, ``passes``, ``factorizations`` (Integer) and the wall times
-  ``wall_statics``, ``wall_factor`` [s] (0 until the first step)
+  ``contact_iterations``, ``passes``, ``factorizations`` (Integer), ``python_steps`` (steps taken
+  in Python, below) and the wall times ``wall_statics``, ``wall_factor`` [s] (0 until the first step)
+
+Compiled steps (``fmus.fast``, ``track.unit_step``): after its first step the instance registers
+with the FMU's C shim a compiled step (a numba C function on the TrackCosim's state buffers) and
+its wheel ports. From then on the shim sets the inputs, takes the steps and reads the wheel outputs
+without entering Python — the same kernel on the same state, so the same numbers to the last bit
+— and hands a step to Python only when it must (a wheel entering a rail element whose data are
+not loaded: Python loads them and the compiled step goes on; a bad input, a step size change, a
+failing or diverged step, a full record: Python takes that step and reports as below). Any other
+call (sensor and counter outputs, FMU state, terminate, ...) first writes the compiled steps'
+state back into the Python objects. ``XPANEL_FMU_FAST=0`` in the host's environment turns it off.
 
 Lazy construction: ``TrackCosim`` needs the communication step, which the FMU
 learns at its first ``doStep``; it is built there, and its first step puts the
@@ -95,15 +105,18 @@ from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Variability
 from pythonfmu.variables import Integer, Real, String
 
 from .base import UNITS, CosimSlave
+from .fast import FastPath, fast_enabled, shim_library
 
 try:  # inside a built FMU the model package is bundled next to this module
     from .track import ballast as _ballast
     from .track import cache as _cache
     from .track import cosim as _cosim
     from .track import dynamics as _dynamics
+    from .track import fused as _fused
     from .track import model as _model
     from .track import params as _params
     from .track import sensors as _sensors
+    from .track import unit_step as _unit_step
 except ModuleNotFoundError as _exc:  # source tree: src/ on sys.path
     if _exc.name != f"{__package__}.track":
         raise   # a dependency of the bundled package is missing (scipy, ...): say which
@@ -111,9 +124,11 @@ except ModuleNotFoundError as _exc:  # source tree: src/ on sys.path
     from track import cache as _cache
     from track import cosim as _cosim
     from track import dynamics as _dynamics
+    from track import fused as _fused
     from track import model as _model
     from track import params as _params
     from track import sensors as _sensors
+    from track import unit_step as _unit_step
 
 # ballast bed stiffness is given per metre of sleeper: N/m per m; accelerations (fmus.base's unit registry)
 UNITS.setdefault("N/m2", {"kg": 1, "m": -1, "s": -2})
@@ -275,7 +290,14 @@ class Track(CosimSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._read_baked()
-        self._x, self._z, self._vz = np.zeros(self._n), np.zeros(self._n), np.zeros(self._n)  # inputs
+        n = self._n
+        self._inp = np.zeros(3 * n)   # the inputs x | z | vz (the fast path's input buffer; never rebound)
+        self._x, self._z, self._vz = self._inp[:n], self._inp[n:2 * n], self._inp[2 * n:]
+        self._fast = None         # FastPath once registered (after the first step); False: none here
+        self._unit = None         # track.unit_step.UnitSteps of the current TrackCosim (the fast path's)
+        self._ctx = None          # its arguments' table for the compiled C step (track.unit_cfunc.pack)
+        self._ctx_record = None   # the record arrays packed into it
+        self._python_steps = 0    # communication steps taken in Python since initialization (monitoring)
         self._model = None        # TrackModel, built at exitInitializationMode
         self._built = None        # the TrackParams it was built from
         self._cosim = None        # TrackCosim, built at the first doStep (needs the step)
@@ -407,6 +429,13 @@ class Track(CosimSlave):
                                    description=self._describe(f"{text} so far (monitoring)", "-"),
                                    getter=lambda attr=attr: int(getattr(self._counters(), attr))), "-")
             self._initial_dependencies[name] = ()
+        self._register(Integer("python_steps", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
+                               description=self._describe(
+                                   "communication steps taken in Python since initialization; the others ran "
+                                   "in the FMU's compiled step (fmus.fast), when the FMU has its C shim "
+                                   "(monitoring)", "-"),
+                               getter=lambda: int(self._python_steps)), "-")
+        self._initial_dependencies["python_steps"] = ()
         for name, text in (("wall_statics", "static equilibrium under the wheels at the first step"),
                            ("wall_factor", "set-up of the time integrator (LU of the step matrix)")):
             self._register(Real(name, causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
@@ -618,6 +647,7 @@ class Track(CosimSlave):
         self._build_model()
         self._cosim = None
         self._t_first = None
+        self._python_steps = 0
         if self._model is not None:
             spec = self._record_columns() or {}
             bad = [k for k, cols in spec.items() if any(not 0 <= i < self._model.n for i in cols)]
@@ -655,6 +685,58 @@ class Track(CosimSlave):
             # the step has overwritten the state with a diverged one: refuse to go on
             self._failure = f"{exc} (restore an FMU state saved before to continue)"
             raise
+        self._python_steps += 1
+        if self._fast is None:
+            self._register_fast()
+
+    # ----------------------------------------------------------------- fast path (fmus.fast)
+    def _register_fast(self) -> None:
+        """Register the compiled C step with the FMU's shim (fmus.fast), where there is one and the
+        TrackCosim can be stepped outside Python (track.fused.fused_unavailable); else step in Python."""
+        self._fast = False
+        lib = shim_library(self.resources) if fast_enabled() else None
+        if lib is None or _fused.fused_unavailable(self._cosim, extrapolated_inputs=True) is not None:
+            return
+        import importlib
+        cfunc = importlib.import_module(_unit_step.__name__.rsplit(".", 1)[0] + ".unit_cfunc")  # compiles / loads
+        self._pack = cfunc.pack
+        self._ctx = np.ones(cfunc.SLOT * len(cfunc.SPEC), np.int64)
+        vr = {v.name: v.value_reference for v in self.vars.values()}
+        n = self._n
+        ins = [vr[f"wheel{i + 1}_{k}"] for k in ("x", "z", "vz") for i in range(n)]
+        outs = [0] * (len(WHEEL_OUTPUTS) * n)
+        for ref, slot in self._wheel_slot.items():
+            outs[slot] = ref
+        fast = FastPath(lib, cfunc.unit_step_address(), ins, self._inp, outs, np.zeros(len(outs)),
+                        self._fast_load, self._fast_sync)
+        if fast.register(self._ctx.ctypes.data):
+            self._fast = fast
+
+    def _fast_load(self, current: bool) -> bool:
+        """The shim's ``load``: the compiled step's buffers current (see fmus.fast.FastPath)."""
+        c = self._cosim
+        if (self._failure is not None or c is None or not c.initialized
+                or _fused.fused_unavailable(c, extrapolated_inputs=True) is not None):
+            return False
+        u = self._unit
+        if current and u is not None:
+            u.load_elements()
+            return True
+        if u is None or u.engine is not c:
+            sleepers = self._model.layout.sleepers
+            u = self._unit = _unit_step.UnitSteps(c, self._inp, sleepers[0].x, sleepers[-1].x, STEP_RTOL)
+            u.outbuf = self._fast.out_buf
+            self._ctx_record = None
+        u.read_engine()
+        if self._ctx_record is not c.record._args:   # the record's arrays moved (or a new unit)
+            self._pack(u.arguments(), self._ctx)
+            self._ctx_record = c.record._args
+        return True
+
+    def _fast_sync(self) -> None:
+        """The shim's ``sync``: the compiled steps' state into the TrackCosim."""
+        if self._unit is not None and self._unit.engine is self._cosim and self._unit.write_engine():
+            self._sensor_values = None
 
     def terminate(self):
         path = self._values["record_file"]

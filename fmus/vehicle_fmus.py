@@ -20,6 +20,7 @@ The slaves only map FMU variables onto the ``vehicle`` model objects.
 """
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 from typing import Any, Dict
 
@@ -27,6 +28,7 @@ import numpy as np
 from pythonfmu.default_experiment import DefaultExperiment
 
 from .base import CosimSlave
+from .fast import FastPath, LtiStep, fast_enabled, lti_step_address, shim_library
 
 try:  # inside a built FMU the model package is bundled next to this module
     from . import vehicle as _vehicle
@@ -72,6 +74,10 @@ class VehicleSlave(CosimSlave):
         self._offsets = preview.wheel_offsets.copy()
         self._built_key = None
         self._time = 0.0
+        self._fast = None          # FastPath once registered (after the first step); False: none here
+        self._lti = LtiStep()      # the shim's step of the zoh system (filled by _fast_load)
+        self._lti_arrays = ()      # the arrays it points into (kept alive)
+        self._time_buf = np.zeros(1)
 
         self.add_parameter("speed", "constant vehicle speed along increasing track coordinate x",
                            "m/s", *self._accessors("speed"))
@@ -181,6 +187,61 @@ class VehicleSlave(CosimSlave):
             stepper.set_step(step_size)
         stepper.step(self.Fz)
         self._time = current_time + step_size
+        if self._fast is None:
+            self._register_fast()
+
+    # -------------------------------------------------------------- fast path (fmus.fast)
+    def _register_fast(self) -> None:
+        """Register the shim's step of a linear discrete-time system (``xpanel_lti_step``) for the
+        exact zoh step, where the FMU has the shim; the wheels' x, z, vz then come from it."""
+        self._fast = False
+        lib = shim_library(self.resources) if fast_enabled() else None
+        if lib is None or self._stepper.hold != "zoh":
+            return
+        m = len(self.Fz)
+        vr = {v.name: v.value_reference for v in self.vars.values()}
+        outs = [vr[f"wheel{i + 1}_{k}"] for k in ("x", "z", "vz") for i in range(m)]
+        fast = FastPath(lib, lti_step_address(lib), [vr[f"wheel{i + 1}_Fz"] for i in range(m)], self.Fz,
+                        outs, np.zeros(3 * m), self._fast_load, self._fast_sync)
+        if fast.register(ctypes.addressof(self._lti)):
+            self._fast = fast
+
+    def _fast_load(self, current: bool) -> bool:
+        """The shim's ``load``: its step's data from the stepper (see fmus.fast.FastPath)."""
+        st = self._stepper
+        if self._failure is not None or st is None or st.hold != "zoh" or st.h is None:
+            return False
+        if current:
+            return True
+        m = len(self.Fz)
+        G = np.ascontiguousarray(st._G, dtype=float)
+        ny = st._ynew.size
+        Y = np.zeros((3 * m, ny))
+        Y[m:] = st._Y
+        v = self._values
+        off = np.concatenate([[v["x0"] + self._offsets[i] for i in range(m)], st._wheel_offset])
+        tco = np.concatenate([np.full(m, float(v["speed"])), np.zeros(2 * m)])
+        out = self._fast.out_buf
+        out[:m] = [self._wheel_x(i) for i in range(m)]
+        out[m:] = st._wheel
+        self._time_buf[0] = self._time
+        self._lti_arrays = (G, st._z, st._ynew, Y, off, tco, out, self.Fz, self._time_buf)
+        a = [x.ctypes.data for x in self._lti_arrays]
+        lti = self._lti
+        lti.ny, lti.nz, lti.nout = ny, G.shape[1], 3 * m
+        lti.G, lti.z, lti.ynew, lti.Y, lti.off, lti.tco, lti.out, lti.u_in, lti.time = a
+        lti.h, lti.rtol, lti.steps = st.h, STEP_RTOL, 0
+        return True
+
+    def _fast_sync(self) -> None:
+        """The shim's ``sync``: the steps' wheel outputs, time and count into the stepper."""
+        st, m = self._stepper, len(self.Fz)
+        if st is None or not self._lti_arrays or self._lti_arrays[1] is not st._z:
+            return
+        st._wheel[:] = self._fast.out_buf[m:]
+        self._time = float(self._time_buf[0])
+        st.steps += int(self._lti.steps)
+        self._lti.steps = 0
 
     # -------------------------------------------------------------- FMU state
     def get_internal_state(self) -> Dict[str, Any]:

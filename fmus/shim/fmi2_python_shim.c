@@ -23,11 +23,27 @@
  * its exit-time use-after-free is avoided by release_wrapper_state (see there).
  * fmi2GetTypesPlatform and fmi2GetVersion answer without loading anything.  Errors go to
  * the host's logger callback (with a NULL callback: stderr).
+ *
+ * Fast path (XpanelFast below).  Every fmi2 call that enters Python costs microseconds
+ * (pythonfmu's wrapper takes the GIL and calls the slave's methods), several times a
+ * step.  A slave may register, for its instance, a compiled step function (a numba cfunc
+ * or xpanel_lti_step below), the value references of its per-step inputs and outputs
+ * with the buffers that hold them, and two callbacks into Python: `load` (make the
+ * buffers hold the state; returns 1 if compiled steps may run) and `sync` (hand the
+ * buffers' state back to the Python objects).  Then fmi2SetReal of those inputs and
+ * fmi2GetReal of those outputs are copies here, and fmi2DoStep calls the step function
+ * without entering Python.  The step function returns 0 when it took the step, 2 when data
+ * must be loaded first (`load` is called, the buffers stay current, and the step is tried
+ * again: a wheel entering a rail element), anything else when Python must take it (nothing
+ * changed): what it does not handle (a bad input, a failing step, ...).
+ * Before any other call is forwarded to Python, `sync` runs, so the slave always sees
+ * the state the steps reached; the next fast step calls `load` again.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <limits.h>
 #include <pthread.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -266,6 +282,135 @@ static int load(const fmi2CallbackFunctions *cb, fmi2String name) {
     return 0;
 }
 
+
+/* ---------------------------------------------------------------- fast path (see the top) */
+typedef int (*XpanelStepF)(void *ctx, double t, double h);
+typedef int (*XpanelCallF)(void);
+
+typedef struct {                       /* as fmus/fast.py's ctypes structure, field by field */
+    void *ctx;                         /* the step function's argument */
+    XpanelStepF step;
+    XpanelCallF load, sync;
+    int64_t n_in, n_out;
+    const uint32_t *in_vr, *out_vr;    /* fmi2SetReal of in_vr[k] writes in_buf[k] ... */
+    double *in_buf;
+    const double *out_buf;             /* ... fmi2GetReal of out_vr[k] reads out_buf[k] */
+    int64_t *mode;                     /* 1: the buffers hold the state (fast steps), 0: Python does */
+} XpanelFast;
+
+#define MAX_FAST 64
+static struct { fmi2Component c; XpanelFast f; } fast_table[MAX_FAST];
+static int n_fast = 0;
+static __thread fmi2Component serving = NULL;   /* the instance of the call being forwarded */
+
+static XpanelFast *fast_of(fmi2Component c) {
+    int i;
+    for (i = 0; i < n_fast; i++)
+        if (fast_table[i].c == c) return &fast_table[i].f;
+    return NULL;
+}
+
+static void fast_drop(fmi2Component c) {
+    int i;
+    pthread_mutex_lock(&lock);
+    for (i = 0; i < n_fast; i++)
+        if (fast_table[i].c == c) {
+            fast_table[i] = fast_table[--n_fast];
+            break;
+        }
+    pthread_mutex_unlock(&lock);
+}
+
+/* Called by the slave's Python during a forwarded call: registers the fast path of the instance
+ * being served (a copy of *spec; the buffers must live until it is dropped).  0 on success. */
+int xpanel_fast_register(const XpanelFast *spec) {
+    XpanelFast *f;
+    int rc = 0;
+    if (!serving || !spec || !spec->step || !spec->load || !spec->sync || !spec->mode) return -1;
+    pthread_mutex_lock(&lock);
+    f = fast_of(serving);
+    if (!f && n_fast < MAX_FAST) {
+        fast_table[n_fast].c = serving;
+        f = &fast_table[n_fast++].f;
+    }
+    if (f) *f = *spec;
+    else rc = -2;
+    pthread_mutex_unlock(&lock);
+    return rc;
+}
+
+/* Drops the fast path of the instance being served (the slave's Python decides it cannot go on). */
+int xpanel_fast_unregister(void) {
+    if (!serving) return -1;
+    fast_drop(serving);
+    return 0;
+}
+
+/* Drops the registration whose `mode` flag is `mode` (the slave's Python object is going away:
+ * fmi2Reset and fmi2FreeInstance make pythonfmu drop it, and its buffers and callbacks with it). */
+int xpanel_fast_forget(const int64_t *mode) {
+    int i;
+    pthread_mutex_lock(&lock);
+    for (i = 0; i < n_fast; i++)
+        if (fast_table[i].f.mode == mode) {
+            fast_table[i] = fast_table[--n_fast];
+            break;
+        }
+    pthread_mutex_unlock(&lock);
+    return 0;
+}
+
+/* before a call enters Python: the slave must see the state the fast steps reached */
+static XpanelFast *enter(fmi2Component c) {
+    XpanelFast *f = n_fast ? fast_of(c) : NULL;
+    serving = c;
+    if (f && *f->mode) f->sync();      /* sets *mode = 0 */
+    return f;
+}
+
+static int index_of(const uint32_t *list, int64_t n, fmi2ValueReference vr) {
+    int64_t k;
+    for (k = 0; k < n; k++)
+        if (list[k] == vr) return (int)k;
+    return -1;
+}
+
+/* A linear discrete-time system as a step function (the vehicle's exact zoh step): ctx is
+ * LtiStep.  y <- G [y | u | 1] (u = the inputs), then out = Y y + off + tco * t_end. */
+typedef struct {
+    int64_t ny, nz, nout;              /* len(y), len(z) = ny + nu + 1, len(out) */
+    double *G, *z, *ynew, *Y, *off, *tco, *out;   /* G (ny, nz), Y (nout, ny), C order */
+    double *u_in;                      /* the input buffer, copied into z[ny:ny+nu] */
+    double h, rtol;                    /* the step the matrices are for, its tolerance */
+    double *time;                      /* the slave's time, advanced */
+    int64_t steps;                     /* steps taken (the slave reads and clears it) */
+} LtiStep;
+
+int xpanel_lti_step(void *ctx, double t, double h) {
+    LtiStep *s = (LtiStep *)ctx;
+    int64_t i, j, nu = s->nz - s->ny - 1;
+    double d = h - s->h, acc;
+    if (!(h > 0.0) || (d < 0 ? -d : d) > s->rtol * s->h) return 1;   /* another step: Python */
+    for (i = 0; i < nu; i++) {
+        if (s->u_in[i] - s->u_in[i] != 0.0) return 1;                 /* NaN or inf: Python */
+        s->z[s->ny + i] = s->u_in[i];
+    }
+    for (i = 0; i < s->ny; i++) {
+        acc = 0.0;
+        for (j = 0; j < s->nz; j++) acc += s->G[i * s->nz + j] * s->z[j];
+        s->ynew[i] = acc;
+    }
+    for (i = 0; i < s->ny; i++) s->z[i] = s->ynew[i];
+    *s->time = t + h;
+    s->steps++;
+    for (i = 0; i < s->nout; i++) {
+        acc = 0.0;
+        for (j = 0; j < s->ny; j++) acc += s->Y[i * s->ny + j] * s->z[j];
+        s->out[i] = acc + s->off[i] + s->tco[i] * *s->time;
+    }
+    return 0;
+}
+
 /* ------------------------------------------------------------------- fmi2 functions */
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
@@ -287,11 +432,14 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 }
 
 void fmi2FreeInstance(fmi2Component c) {
+    enter(c);
+    fast_drop(c);
     if (api.fmi2FreeInstance) api.fmi2FreeInstance(c);
+    serving = NULL;
 }
 
 #define FORWARD(fn, params, args) \
-    fmi2Status fn params { return api.fn ? api.fn args : fmi2Error; }
+    fmi2Status fn params { enter(c); return api.fn ? api.fn args : fmi2Error; }
 
 FORWARD(fmi2SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]),
         (c, on, n, cat))
@@ -300,15 +448,16 @@ FORWARD(fmi2SetupExperiment, (fmi2Component c, fmi2Boolean tol_on, fmi2Real tol,
 FORWARD(fmi2EnterInitializationMode, (fmi2Component c), (c))
 FORWARD(fmi2ExitInitializationMode, (fmi2Component c), (c))
 FORWARD(fmi2Terminate, (fmi2Component c), (c))
-FORWARD(fmi2Reset, (fmi2Component c), (c))
-FORWARD(fmi2GetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]), (c, vr, n, v))
+fmi2Status fmi2Reset(fmi2Component c) {   /* pythonfmu makes a new Python object: its own registration */
+    enter(c);
+    fast_drop(c);
+    return api.fmi2Reset ? api.fmi2Reset(c) : fmi2Error;
+}
 FORWARD(fmi2GetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]),
         (c, vr, n, v))
 FORWARD(fmi2GetBoolean, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]),
         (c, vr, n, v))
 FORWARD(fmi2GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]),
-        (c, vr, n, v))
-FORWARD(fmi2SetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]),
         (c, vr, n, v))
 FORWARD(fmi2SetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]),
         (c, vr, n, v))
@@ -330,10 +479,56 @@ FORWARD(fmi2SetRealInputDerivatives, (fmi2Component c, const fmi2ValueReference 
                                       const fmi2Integer order[], const fmi2Real v[]), (c, vr, n, order, v))
 FORWARD(fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                        const fmi2Integer order[], fmi2Real v[]), (c, vr, n, order, v))
-FORWARD(fmi2DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior), (c, t, h, no_prior))
 FORWARD(fmi2CancelStep, (fmi2Component c), (c))
 FORWARD(fmi2GetStatus, (fmi2Component c, const fmi2StatusKind s, fmi2Status *v), (c, s, v))
 FORWARD(fmi2GetRealStatus, (fmi2Component c, const fmi2StatusKind s, fmi2Real *v), (c, s, v))
 FORWARD(fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind s, fmi2Integer *v), (c, s, v))
 FORWARD(fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind s, fmi2Boolean *v), (c, s, v))
 FORWARD(fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind s, fmi2String *v), (c, s, v))
+
+/* fmi2GetReal, fmi2SetReal, fmi2DoStep: the fast path when registered (see the top) */
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
+    XpanelFast *f = n_fast ? fast_of(c) : NULL;
+    if (f && *f->mode) {
+        size_t k;
+        int j;
+        for (k = 0; k < n; k++) {
+            if ((j = index_of(f->out_vr, f->n_out, vr[k])) < 0) break;
+            v[k] = f->out_buf[j];
+        }
+        if (k == n) return fmi2OK;
+    }
+    enter(c);
+    return api.fmi2GetReal ? api.fmi2GetReal(c, vr, n, v) : fmi2Error;
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
+    XpanelFast *f = n_fast ? fast_of(c) : NULL;
+    if (f) {                           /* the inputs' buffers are the slave's own input arrays */
+        size_t k;
+        for (k = 0; k < n; k++)
+            if (index_of(f->in_vr, f->n_in, vr[k]) < 0) break;
+        if (k == n) {
+            for (k = 0; k < n; k++) f->in_buf[index_of(f->in_vr, f->n_in, vr[k])] = v[k];
+            return fmi2OK;
+        }
+    }
+    enter(c);
+    return api.fmi2SetReal ? api.fmi2SetReal(c, vr, n, v) : fmi2Error;
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior) {
+    XpanelFast *f = n_fast ? fast_of(c) : NULL;
+    serving = c;                       /* `load` may register again (new buffers) */
+    if (f && (*f->mode || f->load() == 1)) {
+        int r = 1, tries = 0;
+        f = fast_of(c);
+        if (f) r = f->step(f->ctx, t, h);
+        /* 2: data to load first (the buffers stay current: load only loads them) */
+        while (r == 2 && tries++ < 16 && f->load() == 1 && (f = fast_of(c)) != NULL)
+            r = f->step(f->ctx, t, h);
+        if (r == 0) return fmi2OK;
+    }
+    enter(c);                          /* Python takes the step (after sync) */
+    return api.fmi2DoStep ? api.fmi2DoStep(c, t, h, no_prior) : fmi2Error;
+}

@@ -192,22 +192,82 @@ def gauss_seidel_steps(k, k_end, resume, t0, h, every, veh, xoff, x0, speed,
     return DONE, k, c, k_track, rec_n, 0.0
 
 
-def fused_unavailable(engine) -> str | None:
-    """Why ``engine`` (a :class:`track.cosim.TrackCosim`) cannot be stepped by :class:`CoupledSteps`, or None."""
+def fused_unavailable(engine, extrapolated_inputs: bool = False) -> str | None:
+    """Why ``engine`` (a :class:`track.cosim.TrackCosim`) cannot be stepped by :class:`CoupledSteps`, or None;
+    ``extrapolated_inputs``: a caller that extrapolates start-of-step inputs as the engine does
+    (:class:`track.unit_step.UnitSteps`) can step an engine that takes them."""
     if engine._compiled is None:
         return "the numpy reference step"
     if engine._compiled._given:
         return "surface heights computed in Python"
     if engine.irregularities is not None:
         return "rail irregularities"
-    if engine.extrapolate:
+    if engine.extrapolate and not extrapolated_inputs:
         return "inputs at the step's start (extrapolated)"
     if engine.tables is not None and engine.contact.lateral_offset_table:
         return "a lateral offset table"
     return None
 
 
-class CoupledSteps:
+class EngineBuffers:
+    """The compiled step's arguments for stepping a :class:`track.cosim.TrackCosim` (initialized, compiled
+    step) outside it, and the state buffers the steps run in: :class:`CoupledSteps` (with a vehicle) and
+    :class:`track.unit_step.UnitSteps` (the track FMU's compiled steps) build on it.
+
+    ``P`` contact_step's fixed arguments; ``Q, V, A, F`` (2, n) and ``Fc`` (2, m): the two state
+    buffers; ``out`` (m, 4) the kernel's outputs; ``trk`` the unit's wheel offsets and outputs
+    (:func:`gauss_seidel_steps`); ``tot`` the work counters of the steps since the last write-back.
+    """
+
+    def __init__(self, engine, extrapolated_inputs: bool = False):
+        why = fused_unavailable(engine, extrapolated_inputs)
+        if why is not None or not engine.initialized:
+            raise ValueError(f"{type(self).__name__}: {why or 'the track is not initialized'}")
+        cc = engine._compiled
+        slots = {i for s, w in zip(_STEP_SLOTS, (5, 2, 6)) for i in range(s, s + w)}
+        names = tuple(p for i, p in enumerate(CONTACT_STEP_PARAMETERS) if i not in slots)
+        if names != FIXED_PARAMETERS or tuple(CONTACT_STEP_PARAMETERS[i] for i in sorted(slots)) != _SLOT_NAMES:
+            raise RuntimeError("track.kernel.contact_step's arguments changed: update track.fused")
+        cc.par[P_CH] = engine.c_h
+        if engine.tables is not None:
+            cc.yw[:] = engine.lateral_offsets(np.zeros(engine.n))   # a constant offset (no table)
+        self.engine, self.cc = engine, cc
+        self.P = tuple(a for i, a in enumerate(cc._args) if i not in slots)
+        n, m = engine.model.n, engine.n
+        self.Q, self.V, self.A, self.F = (np.empty((2, n)) for _ in range(4))
+        self.Fc = np.empty((2, m))
+        self.out = np.empty((m, 4))
+        self.trk = (np.ascontiguousarray(engine.offset, dtype=float),) + tuple(np.empty(m) for _ in range(4)) + \
+            (np.empty((m, 2)), np.empty(m), np.empty(m), np.empty(m))
+        self.tot = np.zeros(5, np.int64)
+
+    def _read_state(self) -> None:
+        """Buffer 0 and the unit's last outputs from the engine (the state the steps start from)."""
+        e, it = self.engine, self.engine.integ
+        m = e.n
+        self.Q[0], self.V[0], self.A[0], self.F[0] = it.q, it.v, it.a, it.F
+        self.Fc[0] = it.Fc if it.Fc.size == m else 0.0
+        self.trk[3][:] = e._Fz_last
+
+    def _write_back(self, c: int, steps: int) -> None:
+        """The engine's and its integrator's state and counters as the stepped path leaves them."""
+        e, it, tot = self.engine, self.engine.integ, self.tot
+        if steps:
+            it.q, it.v, it.a, it.F = self.Q[c].copy(), self.V[c].copy(), self.A[c].copy(), self.F[c].copy()
+            it.Fc = self.Fc[c].copy()
+            _, _, Fz, Fz_last, Fz_cpl, parts, rail_w, _, _ = self.trk
+            e.Fz, e.parts, e.rail_w = Fz.copy(), parts.copy(), rail_w.copy()
+            e.Fz_coupling, e._Fz_last = Fz_cpl.copy(), Fz_last.copy()
+        cn = it.counters
+        cn.solves += int(tot[0])
+        cn.contact_newton += int(tot[1])
+        cn.iterations += int(tot[2])
+        cn.max_iterations = max(cn.max_iterations, int(tot[3]))
+        cn.steps += int(tot[4])
+        tot[:] = 0
+
+
+class CoupledSteps(EngineBuffers):
     """Step a :class:`track.cosim.TrackCosim` (initialized, compiled step) with a linear vehicle.
 
     Parameters
@@ -221,28 +281,9 @@ class CoupledSteps:
     """
 
     def __init__(self, engine, vehicle: tuple, xoff: np.ndarray, x0: float, speed: float):
-        why = fused_unavailable(engine)
-        if why is not None or not engine.initialized:
-            raise ValueError(f"CoupledSteps: {why or 'the track is not initialized'}")
-        cc = engine._compiled
-        slots = {i for s, w in zip(_STEP_SLOTS, (5, 2, 6)) for i in range(s, s + w)}
-        names = tuple(p for i, p in enumerate(CONTACT_STEP_PARAMETERS) if i not in slots)
-        if names != FIXED_PARAMETERS or tuple(CONTACT_STEP_PARAMETERS[i] for i in sorted(slots)) != _SLOT_NAMES:
-            raise RuntimeError("track.kernel.contact_step's arguments changed: update track.fused")
-        cc.par[P_CH] = engine.c_h
-        if engine.tables is not None:
-            cc.yw[:] = engine.lateral_offsets(np.zeros(engine.n))   # a constant offset (no table)
-        self.engine, self.cc = engine, cc
-        self.P = tuple(a for i, a in enumerate(cc._args) if i not in slots)
+        super().__init__(engine)
         self.veh = tuple(vehicle)
         self.xoff, self.x0, self.speed = np.ascontiguousarray(xoff, dtype=float), float(x0), float(speed)
-        n, m = engine.model.n, engine.n
-        self.Q, self.V, self.A, self.F = (np.empty((2, n)) for _ in range(4))
-        self.Fc = np.empty((2, m))
-        self.out = np.empty((m, 4))
-        self.trk = (np.ascontiguousarray(engine.offset, dtype=float),) + tuple(np.empty(m) for _ in range(4)) + \
-            (np.empty((m, 2)), np.empty(m), np.empty(m), np.empty(m))
-        self.tot = np.zeros(5, np.int64)
         self.vehicle_steps = self.signal_steps = 0   # of the last run: vehicle steps taken, steps with signals
 
     def run(self, k: int, k_end: int, t0: float, h: float, every: int, Fz_in: np.ndarray, sig: tuple) -> tuple:
@@ -254,12 +295,10 @@ class CoupledSteps:
         say how far the vehicle and the signals got). Returns ``(k, Fz)``: the steps taken up to,
         the vehicle's next input [N] (a copy)."""
         e, it = self.engine, self.engine.integ
-        m = e.n
         c = 0
-        self.Q[0], self.V[0], self.A[0], self.F[0] = it.q, it.v, it.a, it.F
-        self.Fc[0] = it.Fc if it.Fc.size == m else 0.0
-        zoff, fin, Fz, Fz_last, Fz_cpl, parts, rail_w, _, _ = self.trk
-        fin[:], Fz_last[:] = Fz_in, e._Fz_last
+        self._read_state()
+        fin = self.trk[1]
+        fin[:] = Fz_in
         rec = e.record
         if e.record_every:
             rec.reserve(len(rec) + (k_end - k) // e.record_every + 1)
@@ -289,21 +328,5 @@ class CoupledSteps:
             self.cc.raise_for(status, change)
         return k, fin.copy()
 
-    def _write_back(self, c: int, steps: int) -> None:
-        """The engine's and its integrator's state and counters as the stepped path leaves them."""
-        e, it, tot = self.engine, self.engine.integ, self.tot
-        if steps:
-            it.q, it.v, it.a, it.F = self.Q[c].copy(), self.V[c].copy(), self.A[c].copy(), self.F[c].copy()
-            it.Fc = self.Fc[c].copy()
-            _, _, Fz, Fz_last, Fz_cpl, parts, rail_w, _, _ = self.trk
-            e.Fz, e.parts, e.rail_w = Fz.copy(), parts.copy(), rail_w.copy()
-            e.Fz_coupling, e._Fz_last = Fz_cpl.copy(), Fz_last.copy()
-        cn = it.counters
-        cn.solves += int(tot[0])
-        cn.contact_newton += int(tot[1])
-        cn.iterations += int(tot[2])
-        cn.max_iterations = max(cn.max_iterations, int(tot[3]))
-        cn.steps += int(tot[4])
 
-
-__all__ = ["CoupledSteps", "fused_unavailable", "gauss_seidel_steps"]
+__all__ = ["CoupledSteps", "EngineBuffers", "fused_unavailable", "gauss_seidel_steps"]
