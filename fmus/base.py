@@ -136,6 +136,21 @@ class CosimSlave(Fmi2Slave):
             if var.setter is not None:
                 self._real_setters[var.value_reference] = var.setter
 
+    def _add_python_steps_output(self) -> None:
+        """The Integer output ``python_steps``: communication steps taken in Python since initialization
+        (``self._python_steps``, counted by the subclass); the others ran in the FMU's compiled step
+        through its C shim (``fmus.fast``)."""
+        from pythonfmu.variables import Integer
+
+        self._python_steps = 0
+        self._register(Integer("python_steps", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
+                               description=self._describe(
+                                   "communication steps taken in Python since initialization; the others ran "
+                                   "in the FMU's compiled step (fmus.fast), when the FMU has its C shim "
+                                   "(monitoring)", "-"),
+                               getter=lambda: int(self._python_steps)), "-")
+        self._initial_dependencies["python_steps"] = ()
+
     def get_real(self, vrs):
         """Values of the Real variables ``vrs`` (module docstring, (h))."""
         getters = self._real_getters

@@ -297,7 +297,6 @@ class Track(CosimSlave):
         self._unit = None         # track.unit_step.UnitSteps of the current TrackCosim (the fast path's)
         self._ctx = None          # its arguments' table for the compiled C step (track.unit_cfunc.pack)
         self._ctx_record = None   # the record arrays packed into it
-        self._python_steps = 0    # communication steps taken in Python since initialization (monitoring)
         self._model = None        # TrackModel, built at exitInitializationMode
         self._built = None        # the TrackParams it was built from
         self._cosim = None        # TrackCosim, built at the first doStep (needs the step)
@@ -429,13 +428,7 @@ class Track(CosimSlave):
                                    description=self._describe(f"{text} so far (monitoring)", "-"),
                                    getter=lambda attr=attr: int(getattr(self._counters(), attr))), "-")
             self._initial_dependencies[name] = ()
-        self._register(Integer("python_steps", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
-                               description=self._describe(
-                                   "communication steps taken in Python since initialization; the others ran "
-                                   "in the FMU's compiled step (fmus.fast), when the FMU has its C shim "
-                                   "(monitoring)", "-"),
-                               getter=lambda: int(self._python_steps)), "-")
-        self._initial_dependencies["python_steps"] = ()
+        self._add_python_steps_output()
         for name, text in (("wall_statics", "static equilibrium under the wheels at the first step"),
                            ("wall_factor", "set-up of the time integrator (LU of the step matrix)")):
             self._register(Real(name, causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,

@@ -9,12 +9,18 @@ Ports (DESIGN §4.4), wheels i = 1..n: front wheelset left, right, then the next
 * parameters (variability "fixed": set them before exitInitializationMode, where the
   model is built): ``speed``, ``x0``, ``wheel{i}_z0`` and one per field of the
   model's parameter dataclass (``vehicle.BogieParams`` / ``vehicle.QuarterParams``).
+* output, monitoring: ``python_steps`` (Integer), the steps taken in Python (below)
 
 At exitInitializationMode the vehicle is placed in static equilibrium on the wheel
 positions ``wheel{i}_z0``.  An input the host never set takes the static wheel load
 of the actual parameters (its XML start value is that of the default parameters).
 ``doStep`` advances the model with the exact discretisation for forces held over the
 step (``vehicle.VehicleStepper``, zero-order hold); a new step size re-discretises.
+After the first step the instance registers that step with the FMU's C shim (``fmus.fast``:
+its ``xpanel_lti_step``, ``y <- G [y | Fz | 1]`` and the wheels' x, z, vz, with the slave's own
+arrays): the shim then takes the steps and the port reads and writes without entering Python, the
+same algorithm, summed in index order where numpy's BLAS sums in an order of its own (round-off,
+~1e-12 of the response). A step size change, a non-finite force or any other call goes to Python.
 
 The slaves only map FMU variables onto the ``vehicle`` model objects.
 """
@@ -107,6 +113,7 @@ class VehicleSlave(CosimSlave):
                             (f"wheel{n}_z0",))
             self.add_output(f"wheel{n}_vz", f"vertical velocity of wheel {n} ({self._label(i)}), "
                             "upward +", "m/s", lambda i=i: self._wheel_vz(i))
+        self._add_python_steps_output()
         self.apply_baked_start_values()   # the scenario's x0, speed, ... (fmus.build, start_values)
 
     # ---------------------------------------------------------------- mapping
@@ -162,6 +169,7 @@ class VehicleSlave(CosimSlave):
     def initialize_model(self) -> None:
         self._build(self._wheel_z0())
         self._time = self.start_time
+        self._python_steps = 0
 
     def _build(self, z0: np.ndarray | None) -> None:
         """Build model and stepper from the parameter values; ``z0``: place in static state."""
@@ -187,6 +195,7 @@ class VehicleSlave(CosimSlave):
             stepper.set_step(step_size)
         stepper.step(self.Fz)
         self._time = current_time + step_size
+        self._python_steps += 1
         if self._fast is None:
             self._register_fast()
 

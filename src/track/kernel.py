@@ -968,7 +968,8 @@ def element_tables(model, geometry, par: np.ndarray, tables: list | None = None)
             bodies += [b] * el.size
             elements += el.tolist()
         ts.append(len(elements))
-    cat = (lambda parts, shape: np.concatenate(parts).reshape(shape) if parts else np.zeros((0,) + shape[1:]))
+    cat = (lambda parts, shape: np.ascontiguousarray(np.concatenate(parts).reshape(shape)) if parts
+           else np.zeros((0,) + shape[1:]))   # C order: one array type for every compiled caller
     return (np.array(ts, np.int64), cat(etab, (-1, 3)), cat(ec, (-1, 4, 4)), cat(es, (-1,)).astype(np.int64),
             bodies, elements)
 

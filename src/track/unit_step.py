@@ -139,12 +139,11 @@ class UnitSteps(EngineBuffers):
         self.ist[I_START] = int(engine.extrapolate)
         self.fst = np.array([engine.h, rtol, 0.0, lo, hi, engine.speed])
         self.outbuf = np.zeros(5 * engine.n)
-        self._P = tuple(np.ascontiguousarray(a) for a in self.P)   # C order throughout (one is not)
 
     def arguments(self) -> tuple:
         """:func:`unit_step`'s arguments after ``t, h`` (current: the record's arrays may move)."""
         e = self.engine
-        return (self.inp, self.ist, self.fst, self._P, self.Q, self.V, self.A, self.F, self.Fc, self.out,
+        return (self.inp, self.ist, self.fst, self.P, self.Q, self.V, self.A, self.F, self.Fc, self.out,
                 self.trk, e._limit, e.record._args, self.tot, self.outbuf)
 
     def read_engine(self, reserve: int = 4096) -> None:
