@@ -1,4 +1,5 @@
-"""The in-process Gauss–Seidel loop in compiled blocks (track.fused, orchestrator.cosim.compiled_loop).
+"""The Gauss–Seidel loop in compiled blocks: in-process (track.fused) and over two FMUs
+(orchestrator.cosim.compiled_loop.FmuLoop).
 
 Consistency checks of two code paths of ours (not verification: the physics of both is the
 stepped path's, verified elsewhere): the compiled loop must give the numbers, the errors, the
@@ -123,3 +124,78 @@ def test_units_the_compiled_loop_cannot_step_run_one_call_at_a_time(monkeypatch,
     sc = load_scenario(DEFAULT, over + ["simulation.duration=0.005"])
     assert run_cosim(sc, backend="inprocess", record_states=False).error is None
     assert made == []
+
+
+# ------------------------------------------------------------------ the FMU loop (compiled_loop.FmuLoop)
+@pytest.fixture(scope="module")
+def crossing_fmus(tmp_path_factory):
+    """The FMUs of _crossing_scenario (its track baked in), built once."""
+    from orchestrator.cosim.build_job import build_fmus
+
+    out = tmp_path_factory.mktemp("fused_fmus")
+    build_fmus(_crossing_scenario(), out)
+    return out
+
+
+def _both_fmu(monkeypatch, sc, fmu_dir, **kw):
+    """The FMU run stepped one call at a time, then with the compiled FMU loop (which must have run)."""
+    from orchestrator.cosim import compiled_loop as cl
+
+    made, real = [], cl.FmuLoop
+    monkeypatch.setattr(cl, "FmuLoop", lambda run: made.append(run) or real(run))
+    out = {}
+    for mode in ("0", "1"):
+        monkeypatch.setenv(COMPILED_LOOP_ENV, mode)
+        out[mode] = run_cosim(sc, backend="fmu", fmu_dir=fmu_dir, **kw)
+        assert len(made) == int(mode)
+    return out["0"], out["1"]
+
+
+def test_the_compiled_fmu_loop_gives_the_stepped_loops_numbers(monkeypatch, crossing_fmus):
+    """Both units FMUs, through the crossing with a record of every output row: the compiled loop makes
+    the stepped loop's fmi2 calls with the same values, so signals, record and counters are equal to
+    the last bit (the same FMUs answer both)."""
+    a, b = _both_fmu(monkeypatch, _crossing_scenario(), crossing_fmus, record_states=True)
+    assert a.error is None and b.error is None
+    assert a.Fz[:, 0].max() > 1.05 * a.Fz[1, 0]   # the impact is in the run
+    for k in SIGNALS:
+        assert np.array_equal(getattr(a, k), getattr(b, k), equal_nan=True), k
+    assert a.track_record.keys() == b.track_record.keys()
+    for k, v in a.track_record.items():
+        assert np.array_equal(v, b.track_record[k]), k
+    ca, cb = a.stats.counters, b.stats.counters
+    for k in ("steps", "track_steps", "contact_iterations", "passes"):
+        assert getattr(cb, k) == getattr(ca, k), k
+
+
+def test_the_compiled_fmu_loop_stops_where_the_stepped_loop_stops(monkeypatch, crossing_fmus):
+    """A divergence in the track FMU (its bundled track.cosim's limit lowered to 1.03 static loads, which
+    the crossing's impact passes: the compiled step hands that step to Python, which discards it) ends
+    both loops at the same step with the same message and the same rows written."""
+    import sys
+
+    sc = _crossing_scenario()
+    run_cosim(load_scenario(DEFAULT, ["simulation.duration=0.001"]), backend="fmu", fmu_dir=crossing_fmus,
+              record_states=False)                     # loads the FMU's bundled package
+    bundled = [m for name, m in sys.modules.items() if name.startswith("xpanel_track_") and name.endswith(".cosim")]
+    assert bundled
+    for m in bundled:
+        monkeypatch.setattr(m, "DIVERGENCE_FACTOR", 1.03)
+    a, b = _both_fmu(monkeypatch, sc, crossing_fmus, record_states=False)
+    assert a.error is not None and "fmi2DoStep" in a.error and "track FMU" in a.error
+    assert b.error == a.error
+    assert 10 < len(a.t) < 601 and len(b.t) == len(a.t)
+    for k in SIGNALS:
+        assert np.array_equal(getattr(a, k), getattr(b, k), equal_nan=True), k
+
+
+def test_the_compiled_fmu_loop_reports_progress_at_output_steps(monkeypatch, crossing_fmus):
+    """progress(k, nsteps) between the FMU loop's blocks: at output steps, increasing, the last at the end."""
+    monkeypatch.setenv(COMPILED_LOOP_ENV, "1")
+    calls = []
+    res = run_cosim(_crossing_scenario(0.12), backend="fmu", fmu_dir=crossing_fmus, record_states=False,
+                    progress=lambda k, n: calls.append((k, n)))
+    assert res.error is None
+    ks = [k for k, _ in calls]
+    assert ks == sorted(set(ks)) and all(k % 2 == 0 for k in ks) and len(ks) >= 3
+    assert calls[-1] == (2400, 2400)

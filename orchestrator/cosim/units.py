@@ -247,9 +247,17 @@ class FmuUnit:
     def do_step(self, t: float, h: float) -> None:
         status = self._fn["fmi2DoStep"](self._c, ctypes.c_double(t), ctypes.c_double(h), 1)
         if status > 1:
-            raise CosimError(f"{self.name} FMU ({self.path.name}): fmi2DoStep at t = {t:.6g} s with step "
-                             f"{h:.3g} s returned status {status} (discard/error); see its log, or reduce "
-                             "simulation.step")
+            raise self.step_error(t, h, status)
+
+    def step_error(self, t: float, h: float, status: int) -> CosimError:
+        """The error of an ``fmi2DoStep`` at ``t`` [s] with step ``h`` [s] that returned ``status``."""
+        return CosimError(f"{self.name} FMU ({self.path.name}): fmi2DoStep at t = {t:.6g} s with step "
+                          f"{h:.3g} s returned status {status} (discard/error); see its log, or reduce "
+                          "simulation.step")
+
+    def function(self, name: str, prototype) -> "ctypes._CFuncPtr":
+        """The FMU's C function ``name`` as ``prototype`` (a ``ctypes.CFUNCTYPE``), for compiled callers."""
+        return prototype(ctypes.cast(self._fn[name], ctypes.c_void_p).value)
 
     def terminate(self) -> None:
         try:
@@ -272,15 +280,27 @@ class RealPort:
     def get(self) -> np.ndarray:
         status = self.unit._fn["fmi2GetReal"](self.unit._c, self._vr, self._n, self._buf)
         if status > 1:
-            raise CosimError(f"{self.unit.name} FMU: fmi2GetReal returned status {status}")
+            raise self.get_error(status)
         return self.values
 
     def set(self, values: np.ndarray) -> None:
         self.values[:] = values
         status = self.unit._fn["fmi2SetReal"](self.unit._c, self._vr, self._n, self._buf)
         if status > 1:
-            raise CosimError(f"{self.unit.name} FMU: fmi2SetReal returned status {status} "
-                             f"(values {np.array2string(np.asarray(values), precision=4)})")
+            raise self.set_error(status)
+
+    @property
+    def references(self) -> int:
+        """Address of the value references (``fmi2ValueReference[n]``), for compiled callers."""
+        return ctypes.addressof(self._vr)
+
+    def get_error(self, status: int) -> CosimError:
+        return CosimError(f"{self.unit.name} FMU: fmi2GetReal returned status {status}")
+
+    def set_error(self, status: int) -> CosimError:
+        """The error of an ``fmi2SetReal`` of :attr:`values` that returned ``status``."""
+        return CosimError(f"{self.unit.name} FMU: fmi2SetReal returned status {status} "
+                          f"(values {np.array2string(np.asarray(self.values), precision=4)})")
 
 
 class FmuVehicle:
