@@ -299,25 +299,31 @@ typedef struct {                       /* as fmus/fast.py's ctypes structure, fi
 } XpanelFast;
 
 #define MAX_FAST 64
+/* Slots never move: a thread stepping one instance reads its slot while another registers or drops
+ * another instance (hosts such as libcosim step FMUs in parallel threads); changes are under `lock`. */
 static struct { fmi2Component c; XpanelFast f; } fast_table[MAX_FAST];
-static int n_fast = 0;
+static int n_fast = 0;                          /* slots in use, for a quick "none at all" */
 static __thread fmi2Component serving = NULL;   /* the instance of the call being forwarded */
 
 static XpanelFast *fast_of(fmi2Component c) {
     int i;
-    for (i = 0; i < n_fast; i++)
+    if (!c) return NULL;               /* free slots hold NULL */
+    for (i = 0; i < MAX_FAST; i++)
         if (fast_table[i].c == c) return &fast_table[i].f;
     return NULL;
+}
+
+static void fast_clear(int i) {                 /* under lock */
+    fast_table[i].c = NULL;
+    memset(&fast_table[i].f, 0, sizeof fast_table[i].f);
+    n_fast--;
 }
 
 static void fast_drop(fmi2Component c) {
     int i;
     pthread_mutex_lock(&lock);
-    for (i = 0; i < n_fast; i++)
-        if (fast_table[i].c == c) {
-            fast_table[i] = fast_table[--n_fast];
-            break;
-        }
+    for (i = 0; c && i < MAX_FAST; i++)
+        if (fast_table[i].c == c) fast_clear(i);
     pthread_mutex_unlock(&lock);
 }
 
@@ -329,12 +335,19 @@ int xpanel_fast_register(const XpanelFast *spec) {
     if (!serving || !spec || !spec->step || !spec->load || !spec->sync || !spec->mode) return -1;
     pthread_mutex_lock(&lock);
     f = fast_of(serving);
-    if (!f && n_fast < MAX_FAST) {
-        fast_table[n_fast].c = serving;
-        f = &fast_table[n_fast++].f;
+    if (!f) {
+        int i;
+        for (i = 0; i < MAX_FAST && fast_table[i].c; i++) {}
+        if (i < MAX_FAST) {
+            fast_table[i].f = *spec;
+            fast_table[i].c = serving;
+            n_fast++;
+            f = &fast_table[i].f;
+        }
+    } else {
+        *f = *spec;
     }
-    if (f) *f = *spec;
-    else rc = -2;
+    if (!f) rc = -2;                   /* table full: this instance steps in Python */
     pthread_mutex_unlock(&lock);
     return rc;
 }
@@ -351,11 +364,8 @@ int xpanel_fast_unregister(void) {
 int xpanel_fast_forget(const int64_t *mode) {
     int i;
     pthread_mutex_lock(&lock);
-    for (i = 0; i < n_fast; i++)
-        if (fast_table[i].f.mode == mode) {
-            fast_table[i] = fast_table[--n_fast];
-            break;
-        }
+    for (i = 0; mode && i < MAX_FAST; i++)
+        if (fast_table[i].c && fast_table[i].f.mode == mode) fast_clear(i);
     pthread_mutex_unlock(&lock);
     return 0;
 }
