@@ -91,6 +91,21 @@ _DO_STEP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctyp
 DONE, VEHICLE_SET, VEHICLE_STEP, VEHICLE_GET, TRACK_SET, TRACK_STEP, TRACK_GET = range(7)
 
 
+def _unit_step_py(fset, fstep, fget, c, vr_in, n_in, values_in, vr_out, n_out, values_out, t, h):
+    """One unit's step as the stepped loop makes it: fmi2SetReal of its inputs, fmi2DoStep, fmi2GetReal of
+    its outputs. Returns (0: done, or 1, 2, 3: the set, step or get that failed; its status)."""
+    s = fset(c, vr_in, n_in, values_in.ctypes.data)
+    if s > 1:
+        return 1, s
+    s = fstep(c, t, h, 1)
+    if s > 1:
+        return 2, s
+    s = fget(c, vr_out, n_out, values_out.ctypes.data)
+    if s > 1:
+        return 3, s
+    return 0, 0
+
+
 def _fmu_steps_py(k, k_end, t0, h, every, vc, tc, vset, vstep, vget, tset, tstep, tget,
                   vr_force, force, vr_wheels, wheels, vr_inputs, inputs, vr_outputs, outputs,
                   Fs, zs, vzs, Fz, st, sx, sz, svz, sFz, sparts, srail):
@@ -110,28 +125,16 @@ def _fmu_steps_py(k, k_end, t0, h, every, vc, tc, vset, vstep, vget, tset, tstep
         t = t0 + k * h
         for i in range(m):
             force[i] = Fs[i] * Fz[i]
-        s = vset(vc, vr_force, m, force.ctypes.data)
-        if s > 1:
-            return VEHICLE_SET, k, s
-        s = vstep(vc, t, h, 1)
-        if s > 1:
-            return VEHICLE_STEP, k, s
-        s = vget(vc, vr_wheels, 3 * m, wheels.ctypes.data)
-        if s > 1:
-            return VEHICLE_GET, k, s
+        failed, s = _unit_step(vset, vstep, vget, vc, vr_force, m, force, vr_wheels, 3 * m, wheels, t, h)
+        if failed:
+            return VEHICLE_SET + failed - 1, k, s
         for i in range(m):
             inputs[i] = wheels[i]
             inputs[m + i] = zs[i] * wheels[m + i]
             inputs[2 * m + i] = vzs[i] * wheels[2 * m + i]
-        s = tset(tc, vr_inputs, 3 * m, inputs.ctypes.data)
-        if s > 1:
-            return TRACK_SET, k, s
-        s = tstep(tc, t, h, 1)
-        if s > 1:
-            return TRACK_STEP, k, s
-        s = tget(tc, vr_outputs, 5 * m, outputs.ctypes.data)
-        if s > 1:
-            return TRACK_GET, k, s
+        failed, s = _unit_step(tset, tstep, tget, tc, vr_inputs, 3 * m, inputs, vr_outputs, 5 * m, outputs, t, h)
+        if failed:
+            return TRACK_SET + failed - 1, k, s
         for i in range(m):
             Fz[i] = outputs[i]
         k += 1
@@ -151,9 +154,10 @@ def _fmu_steps_py(k, k_end, t0, h, every, vc, tc, vset, vstep, vget, tset, tstep
 
 try:
     import numba
+    _unit_step = numba.njit(cache=True)(_unit_step_py)
     _fmu_steps = numba.njit(cache=True)(_fmu_steps_py)
 except ImportError:   # numba is a dependency; without it the loop is Python (no faster than the stepped one)
-    _fmu_steps = _fmu_steps_py
+    _unit_step, _fmu_steps = _unit_step_py, _fmu_steps_py
 
 
 class FmuLoop:
