@@ -680,7 +680,11 @@ class Track(CosimSlave):
             raise
         self._python_steps += 1
         if self._fast is None:
-            self._register_fast()
+            try:
+                self._register_fast()
+            except Exception as exc:   # an optimisation: never a failed step (the step is taken)
+                self._fast = False
+                self.log_warning(f"compiled steps unavailable, stepping in Python: {type(exc).__name__}: {exc}")
 
     # ----------------------------------------------------------------- fast path (fmus.fast)
     def _register_fast(self) -> None:

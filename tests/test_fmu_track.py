@@ -342,6 +342,27 @@ def test_compiled_steps_give_the_python_steps_numbers(instances, monkeypatch, tm
         assert np.array_equal(rec0[key], rec1[key]), key
 
 
+def test_state_of_another_instance_restored_into_a_stepping_one(instances):
+    """An FMU state serialized by instance A restored into instance B that has been taking compiled steps
+    since other first wheel positions (so other static offsets, part of the state): B then continues as A
+    does, to the last bit (the compiled step takes the restored offsets, not the ones it started with)."""
+    params = dict(speed=5.0, extrapolate=True, auto_offset=True)
+    a = instances("track2", "offsets_a").init(**params)
+    drive(a, 0, 30)
+    blob = a.fmu.serializeFMUstate(a.fmu.getFMUstate())
+    ahead = drive(a, 30, 40)
+    b = instances("track2", "offsets_b").init(**params)
+    for k in range(30):                       # other wheel positions: 0.4 m further on
+        x, z, vz = moving_inputs(k, b.n)
+        b.set("x", x + 0.4)
+        b.set("z", z)
+        b.set("vz", vz)
+        b.fmu.doStep(k * H, H)
+    assert b.fmu.getInteger([b.vr["python_steps"]])[0] == 1      # B took compiled steps
+    b.fmu.setFMUstate(b.fmu.deSerializeFMUstate(blob))
+    assert np.array_equal(drive(b, 30, 40), ahead)
+
+
 def test_state_saved_before_the_first_step_restores_lazy_construction(instances):
     """A state taken before the first doStep (no TrackCosim yet) restores to 'not
     started': the next step initializes again and gives the same outputs."""

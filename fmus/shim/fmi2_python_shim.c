@@ -401,10 +401,9 @@ int xpanel_lti_step(void *ctx, double t, double h) {
     int64_t i, j, nu = s->nz - s->ny - 1;
     double d = h - s->h, acc;
     if (!(h > 0.0) || (d < 0 ? -d : d) > s->rtol * s->h) return 1;   /* another step: Python */
-    for (i = 0; i < nu; i++) {
-        if (s->u_in[i] - s->u_in[i] != 0.0) return 1;                 /* NaN or inf: Python */
-        s->z[s->ny + i] = s->u_in[i];
-    }
+    for (i = 0; i < nu; i++)
+        if (s->u_in[i] - s->u_in[i] != 0.0) return 1;                 /* NaN or inf: Python (nothing changed) */
+    for (i = 0; i < nu; i++) s->z[s->ny + i] = s->u_in[i];
     for (i = 0; i < s->ny; i++) {
         acc = 0.0;
         for (j = 0; j < s->nz; j++) acc += s->G[i * s->nz + j] * s->z[j];

@@ -237,17 +237,20 @@ class EngineBuffers:
         self.Q, self.V, self.A, self.F = (np.empty((2, n)) for _ in range(4))
         self.Fc = np.empty((2, m))
         self.out = np.empty((m, 4))
-        self.trk = (np.ascontiguousarray(engine.offset, dtype=float),) + tuple(np.empty(m) for _ in range(4)) + \
+        self.trk = (np.array(engine.offset, dtype=float),) + tuple(np.empty(m) for _ in range(4)) + \
             (np.empty((m, 2)), np.empty(m), np.empty(m), np.empty(m))
         self.tot = np.zeros(5, np.int64)
 
     def _read_state(self) -> None:
-        """Buffer 0 and the unit's last outputs from the engine (the state the steps start from)."""
+        """Buffer 0, the last contact force (the coupling force's extrapolation) and the wheels' static
+        offsets from the engine: the state the steps start from (an FMU state restored into the engine
+        may have brought other offsets)."""
         e, it = self.engine, self.engine.integ
         m = e.n
         self.Q[0], self.V[0], self.A[0], self.F[0] = it.q, it.v, it.a, it.F
         self.Fc[0] = it.Fc if it.Fc.size == m else 0.0
         self.trk[3][:] = e._Fz_last
+        self.trk[0][:] = e.offset
 
     def _write_back(self, c: int, steps: int) -> None:
         """The engine's and its integrator's state and counters as the stepped path leaves them."""
