@@ -118,11 +118,6 @@ class FastPath:
         self.lib.xpanel_fast_register.restype = ctypes.c_int
         return self.lib.xpanel_fast_register(ctypes.byref(spec)) == 0
 
-    def unregister(self) -> None:
-        """Drop the registration (during a call the shim forwards to this instance)."""
-        self.mode[0] = 0
-        self.lib.xpanel_fast_unregister()
-
     def __del__(self):
         # the shim must not call into a freed object (pythonfmu drops the slave at fmi2Reset, ...)
         try:
@@ -132,11 +127,14 @@ class FastPath:
             pass
 
     def _load(self) -> int:
+        current = bool(self.mode[0])
         try:
-            ok = bool(self._load_fn(bool(self.mode[0])))
+            ok = bool(self._load_fn(current))
         except Exception:   # never into C
             _LOG.exception("fast path: load failed; stepping in Python")
             ok = False
+        if current and not ok:
+            self._sync()    # Python takes the step: from the state the compiled steps reached
         self.mode[0] = int(ok)
         return int(ok)
 

@@ -352,13 +352,6 @@ int xpanel_fast_register(const XpanelFast *spec) {
     return rc;
 }
 
-/* Drops the fast path of the instance being served (the slave's Python decides it cannot go on). */
-int xpanel_fast_unregister(void) {
-    if (!serving) return -1;
-    fast_drop(serving);
-    return 0;
-}
-
 /* Drops the registration whose `mode` flag is `mode` (the slave's Python object is going away:
  * fmi2Reset and fmi2FreeInstance make pythonfmu drop it, and its buffers and callbacks with it). */
 int xpanel_fast_forget(const int64_t *mode) {
