@@ -33,7 +33,8 @@ class _Spec(ctypes.Structure):
     _fields_ = [("ctx", ctypes.c_void_p), ("step", ctypes.c_void_p), ("load", ctypes.c_void_p),
                 ("sync", ctypes.c_void_p), ("n_in", ctypes.c_int64), ("n_out", ctypes.c_int64),
                 ("in_vr", ctypes.c_void_p), ("out_vr", ctypes.c_void_p), ("in_buf", ctypes.c_void_p),
-                ("out_buf", ctypes.c_void_p), ("mode", ctypes.c_void_p)]
+                ("out_buf", ctypes.c_void_p), ("mode", ctypes.c_void_p), ("lazy", ctypes.c_void_p),
+                ("n_eager", ctypes.c_int64)]
 
 
 class LtiStep(ctypes.Structure):
@@ -85,6 +86,10 @@ class FastPath:
     in_buf, out_buf : float64 arrays
         Their values, in that order: ``in_buf`` must be the slave's own input storage (the shim
         writes it), ``out_buf`` what the step writes.
+    lazy : int, optional
+        Address of ``int lazy(void *ctx, double, double)``, which fills ``out_buf[n_eager:]`` (outputs
+        evaluated only when read, at most once a step; 0 from it: done); ``n_eager`` (default: all) the
+        outputs ``step`` writes itself.
     load, sync : callables
         ``load(current)`` -> bool: make the step's buffers current — when ``current`` is False, copy
         the slave's state in; in both cases load pending data (the step returned 2) — False: no
@@ -94,7 +99,8 @@ class FastPath:
     """
 
     def __init__(self, lib: ctypes.CDLL, step: int, in_vrs: Sequence[int], in_buf: np.ndarray,
-                 out_vrs: Sequence[int], out_buf: np.ndarray, load: Callable[[bool], bool], sync: Callable[[], None]):
+                 out_vrs: Sequence[int], out_buf: np.ndarray, load: Callable[[bool], bool], sync: Callable[[], None],
+                 lazy: int = 0, n_eager: int | None = None):
         self.lib = lib
         self.mode = np.zeros(1, np.int64)     # 1: the buffers hold the state
         self.ctx = None                       # what ``step`` gets (set by the owner before registering)
@@ -106,6 +112,7 @@ class FastPath:
         if out_buf.dtype != np.float64 or out_buf.size != self._out_vr.size or not out_buf.flags.c_contiguous:
             raise ValueError("FastPath: out_buf must be float64, contiguous, one value per output reference")
         self._step, self._load_fn, self._sync_fn = step, load, sync
+        self._lazy, self._n_eager = lazy, self._out_vr.size if n_eager is None else int(n_eager)
         self._load_cb, self._sync_cb = _CALLBACK(self._load), _CALLBACK(self._sync)   # kept alive here
 
     def register(self, ctx: int) -> bool:
@@ -114,7 +121,7 @@ class FastPath:
         spec = _Spec(ctx, self._step, ctypes.cast(self._load_cb, ctypes.c_void_p).value,
                      ctypes.cast(self._sync_cb, ctypes.c_void_p).value, self._in_vr.size, self._out_vr.size,
                      _address(self._in_vr), _address(self._out_vr), _address(self.in_buf), _address(self.out_buf),
-                     _address(self.mode))
+                     _address(self.mode), self._lazy or None, self._n_eager)
         self.lib.xpanel_fast_register.restype = ctypes.c_int
         return self.lib.xpanel_fast_register(ctypes.byref(spec)) == 0
 

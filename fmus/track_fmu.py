@@ -216,7 +216,8 @@ class SensorReader:
     20 sensors).  They are restricted once to their non-zero columns and stacked, so a
     reading gathers those entries of q and a, evaluates the bushings under the pressure
     cells only, and does one (ns_out, n_used) matrix-vector product, the arithmetic of
-    ``track.sensors.sensor_signals`` at one time (up to the order of summation).
+    ``track.sensors.sensor_signals`` at one time (up to the order of summation), in compiled code
+    that the FMU's compiled steps call too (``track.unit_step.sensor_read``).
 
     Output rows, in this order: one per sensor (pressure: bushing pressures; acceleration:
     row on a; strain: row on q; displacement: ``track.sensors.displacement_row`` on q,
@@ -253,24 +254,24 @@ class SensorReader:
         bal = model.ballast   # the bushings under the pressure cells (arrays all of length nb)
         self.ballast = _ballast.Ballast(**{f.name: getattr(bal, f.name)[used] for f in dataclasses.fields(bal)})
         self.C = np.ascontiguousarray(np.hstack([Cq[:, self.cols_q], Ca[:, self.cols_a], Pb[:, used]]))
-        self._nq, self._na = self.cols_q.size, self.cols_a.size
         self._x = np.empty(self.C.shape[1])   # gathered q, a entries and bushing pressures
         self.values = np.zeros(n_out)
+        b = self.ballast
+        # track.unit_step.sensor_read's arrays: the compiled steps (fmus.fast) evaluate the same function
+        self.arrays = (*(np.ascontiguousarray(x, dtype=np.int64) for x in (self.cols_q, self.cols_a, b.dof)),
+                       *(np.ascontiguousarray(x, dtype=float) for x in (b.k, b.c, b.gap, b.area)), self.C, self._x)
 
     def read(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """Sensor values at the state (q [m], v [m/s], a [m/s2], shape (n,)).
+        """Sensor values at the state (q [m], v [m/s], a [m/s2], shape (n,)): the pressures by the law of
+        ``track.ballast.Ballast.pressure`` and one product, in compiled code (``track.unit_step.sensor_read``).
 
         Returns
         -------
         ndarray, shape (n_out,)
             SI units; a view of a buffer that the next call overwrites.
         """
-        x, nq, na = self._x, self._nq, self._na
-        np.take(q, self.cols_q, out=x[:nq], mode="clip")   # clip: unbuffered; indices are valid
-        np.take(a, self.cols_a, out=x[nq:nq + na], mode="clip")
-        D = self.ballast.dof
-        x[nq + na:] = self.ballast.pressure(q[D], v[D])
-        np.dot(self.C, x, out=self.values)
+        _unit_step.sensor_read(np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(v, dtype=float),
+                               np.ascontiguousarray(a, dtype=float), *self.arrays, self.values)
         return self.values
 
 
@@ -461,6 +462,7 @@ class Track(CosimSlave):
         names = {v.name for v in self.vars.values()}
         outputs = [(s.id, s, SENSOR_UNITS[s.type]) for s in self._sensors]
         outputs += [(s.id + ACCELEROMETER_SUFFIX, s, "m/s2") for s in self._sensors if s.type == "displacement"]
+        self._sensor_names = [name for name, _, _ in outputs]
         for j, (name, s, unit) in enumerate(outputs):
             if name in names:
                 raise ValueError(f"sensor output {name!r} clashes with another variable of the track FMU")
@@ -704,8 +706,10 @@ class Track(CosimSlave):
         outs = [0] * (len(WHEEL_OUTPUTS) * n)
         for ref, slot in self._wheel_slot.items():
             outs[slot] = ref
+        n_wheel = len(outs)
+        outs += [vr[name] for name in self._sensor_names]     # evaluated when read (cfunc.unit_sensors_c)
         fast = FastPath(lib, cfunc.unit_step_address(), ins, self._inp, outs, np.zeros(len(outs)),
-                        self._fast_load, self._fast_sync)
+                        self._fast_load, self._fast_sync, lazy=cfunc.unit_sensors_address(), n_eager=n_wheel)
         if fast.register(self._ctx.ctypes.data):
             self._fast = fast
 
@@ -721,7 +725,8 @@ class Track(CosimSlave):
             return True
         if u is None or u.engine is not c:
             sleepers = self._model.layout.sleepers
-            u = self._unit = _unit_step.UnitSteps(c, self._inp, sleepers[0].x, sleepers[-1].x, STEP_RTOL)
+            sensors = self._reader.arrays if self._reader is not None else _unit_step.NO_SENSORS
+            u = self._unit = _unit_step.UnitSteps(c, self._inp, sleepers[0].x, sleepers[-1].x, STEP_RTOL, sensors)
             u.outbuf = self._fast.out_buf
             self._ctx_record = None
         u.read_engine()

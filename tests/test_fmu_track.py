@@ -859,3 +859,26 @@ def test_build_job_sensor_layout_policy(plain_scenario, scenarios_dir):
     named = dataclasses.replace(plain_scenario, sensors=str(scenarios_dir / "sensors" / "in2track_like.yaml"))
     with pytest.raises(UserInputError, match="A5"):
         scenario_sensors(named)
+
+
+def test_sensor_outputs_of_the_compiled_steps_are_the_python_steps(crossing_fmu, monkeypatch):
+    """Sensor outputs read after every step: with the compiled steps the shim evaluates them itself (lazily,
+    track.unit_step.sensor_read, without entering Python), without them Python evaluates the same function:
+    equal to the last bit, and reading them did not make Python take steps (python_steps 1 against 40)."""
+    from track.layout import build_layout
+
+    sensors = crossing_fmu["sensors"]
+    x_t = build_layout(crossing_fmu["scenario"].track.layout).x_transition
+    runs = {}
+    for mode in ("0", "1"):
+        monkeypatch.setenv("XPANEL_FMU_FAST", mode)
+        inst = Instance(crossing_fmu["files"], "crossing2", f"sensors_{mode}").init()
+        try:
+            out, wheels = creep_to_transition(inst, sensors, 0, N_SENSOR_STEPS, x_t)
+            runs[mode] = (out, wheels, inst.fmu.getInteger([inst.vr["python_steps"]])[0])
+        finally:
+            inst.close()
+    (out0, wheels0, n0), (out1, wheels1, n1) = runs["0"], runs["1"]
+    assert np.ptp(out0, axis=0).max() > 0.0            # the sensors respond
+    assert np.array_equal(out0, out1) and np.array_equal(wheels0, wheels1)
+    assert n0 == N_SENSOR_STEPS and n1 == 1

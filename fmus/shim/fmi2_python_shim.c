@@ -35,7 +35,9 @@
  * without entering Python.  The step function returns 0 when it took the step, 2 when data
  * must be loaded first (`load` is called, the buffers stay current, and the step is tried
  * again: a wheel entering a rail element), anything else when Python must take it (nothing
- * changed): what it does not handle (a bad input, a failing step, ...).
+ * changed): what it does not handle (a bad input, a failing step, ...).  Outputs that cost
+ * something to evaluate (the track's sensors) may be registered as lazy: the first read of
+ * them after a step calls the registered `lazy` function, which fills their buffer.
  * Before any other call is forwarded to Python, `sync` runs, so the slave always sees
  * the state the steps reached; the next fast step calls `load` again.
  */
@@ -296,6 +298,8 @@ typedef struct {                       /* as fmus/fast.py's ctypes structure, fi
     double *in_buf;
     const double *out_buf;             /* ... fmi2GetReal of out_vr[k] reads out_buf[k] */
     int64_t *mode;                     /* 1: the buffers hold the state (fast steps), 0: Python does */
+    XpanelStepF lazy;                  /* out_buf[n_eager:] are evaluated by lazy(ctx, 0, 0) when read */
+    int64_t n_eager;                   /* (0 from lazy: done; else Python answers the read) */
 } XpanelFast;
 
 #define MAX_FAST 64
@@ -493,9 +497,13 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     XpanelFast *f = n_fast ? fast_of(c) : NULL;
     if (f && *f->mode) {
         size_t k;
-        int j;
+        int j, evaluated = 0;
         for (k = 0; k < n; k++) {
             if ((j = index_of(f->out_vr, f->n_out, vr[k])) < 0) break;
+            if (j >= f->n_eager && !evaluated) {
+                if (!f->lazy || f->lazy(f->ctx, 0.0, 0.0) != 0) break;
+                evaluated = 1;
+            }
             v[k] = f->out_buf[j];
         }
         if (k == n) return fmi2OK;

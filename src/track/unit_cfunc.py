@@ -16,7 +16,7 @@ from numba import carray, cfunc, types
 from numba.extending import intrinsic
 
 from .kernel import _njit
-from .unit_step import unit_step
+from .unit_step import unit_sensors, unit_step
 
 # kind of each array of unit_step's arguments after t, h (flattened: P's 43 arrays, trk's 9, the record's 10):
 # f/i/u float64/int64/uint8, then the number of dimensions
@@ -28,7 +28,8 @@ SPEC = ("f1", "i1", "f1",
         "f1", "f1", "f1", "f1", "f1", "f2", "f1", "f1", "f1",
         "f1",
         "i1", "i1", "i1", "f1", "f2", "f2", "f3", "f2", "f2", "f2",
-        "i1", "f1")
+        "i1", "f1",
+        "i1", "i1", "i1", "f1", "f1", "f1", "f1", "f2", "f1")   # the sensors' (unit_step.sensor_read)
 SLOT = 5   # int64 per array in ctx: address, then 4 dimensions (1 where unused)
 _KINDS = {"f": np.float64, "i": np.int64, "u": np.uint8}
 
@@ -126,9 +127,25 @@ def unit_step_c(ctx_address, t, h):
     return unit_step(t, h, inp, ist, fst, P, Q, V, A, F, Fc, out, trk, limit, rec, tot, outbuf)
 
 
+@cfunc(types.int32(types.voidptr, types.float64, types.float64), nopython=True, cache=True, error_model="numpy")
+def unit_sensors_c(ctx_address, t, h):
+    """:func:`~track.unit_step.unit_sensors` on the arrays of ``ctx`` (``t``, ``h`` unused: the shim's
+    signature for a step function)."""
+    ctx = carray(ctx_address, (SLOT * len(SPEC),), np.int64)
+    sens = (_i1(ctx, 74), _i1(ctx, 75), _i1(ctx, 76), _f1(ctx, 77), _f1(ctx, 78), _f1(ctx, 79), _f1(ctx, 80),
+            _f2(ctx, 81), _f1(ctx, 82))
+    outbuf = _f1(ctx, 73)
+    return unit_sensors(_i1(ctx, 1), _f2(ctx, 46), _f2(ctx, 47), _f2(ctx, 48), sens, outbuf, _f1(ctx, 61).size)
+
+
 def unit_step_address() -> int:
     """Address of the C function ``int step(void *ctx, double t, double h)``."""
     return unit_step_c.address
 
 
-__all__ = ["SPEC", "pack", "unit_step_address", "unit_step_c"]
+def unit_sensors_address() -> int:
+    """Address of the C function that evaluates the sensor outputs on demand (same signature)."""
+    return unit_sensors_c.address
+
+
+__all__ = ["SPEC", "pack", "unit_sensors_address", "unit_sensors_c", "unit_step_address", "unit_step_c"]

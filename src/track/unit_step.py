@@ -27,13 +27,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from .ballast import DAMPING_ONSET
 from .fused import EngineBuffers, _call_kernel, _track_outputs
 from .kernel import C_MAXPASS, C_NEWTON, C_PASSES, C_SOLVES, NEED_ELEMENT, OK, _njit, record_row
 
 UNIT_TOOK, UNIT_PYTHON, UNIT_ELEMENT = 0, 1, 2   # unit_step's answers: done; Python takes it; load elements
 # the integer state ``ist``: state buffer, track steps, record rows written / reserved, record every,
-# extrapolated force (0/1), steps since the last write-back, inputs at the step's start (0/1: extrapolated)
-I_C, I_K, I_RECN, I_RECCAP, I_EVERY, I_EXTRAP, I_STEPS, I_START = range(8)
+# extrapolated force (0/1), steps since the last write-back, inputs at the step's start (0/1: extrapolated),
+# sensor values not yet evaluated at the current state (0/1)
+I_C, I_K, I_RECN, I_RECCAP, I_EVERY, I_EXTRAP, I_STEPS, I_START, I_STALE = range(9)
 # the float settings ``fst``: the engine's step [s], its tolerance, its time origin [s], the panel's ends [m],
 # the speed the inputs are extrapolated with [m/s]
 F_H, F_RTOL, F_T0, F_LO, F_HI, F_SPEED = range(6)
@@ -99,6 +101,7 @@ def unit_step(t, h, inp, ist, fst, P, Q, V, A, F, Fc, out, trk, limit, rec, tot,
         record_row(ist[I_RECN], fst[F_T0] + k1 * hh, xw, trk[2], trk[5], Q[c], V[c], A[c],
                    rec[0], rec[1], rec[2], rec[3], rec[4], rec[5], rec[6], rec[7], rec[8], rec[9])
         ist[I_RECN] += 1
+    ist[I_STALE] = 1
     Fz, Fz_cpl, parts, rail_w = trk[2], trk[4], trk[5], trk[6]
     for i in range(m):
         outbuf[i] = Fz[i]
@@ -107,6 +110,54 @@ def unit_step(t, h, inp, ist, fst, P, Q, V, A, F, Fc, out, trk, limit, rec, tot,
         outbuf[3 * m + i] = parts[i, 1]
         outbuf[4 * m + i] = rail_w[i]
     return UNIT_TOOK
+
+
+@_njit
+def sensor_read(q, v, a, cols_q, cols_a, dof, k, c, gap, area, C, x, values):
+    """Sensor values ``values = C [q[cols_q] | a[cols_a] | p]`` at the state q [m], v [m/s], a [m/s2], with p
+    the ballast pressures [Pa] of the bushings ``dof`` (stiffness k, damping c, gap, area: the law of
+    ``track.ballast.Ballast.pressure``, operation for operation); ``x`` the gathered entries (scratch).
+
+    The sums run in index order: the FMU's sensor outputs, read in Python (``fmus.track_fmu.SensorReader``)
+    or by its shim (:func:`unit_sensors`), are this function's values either way.
+    """
+    nq, na = cols_q.size, cols_a.size
+    for i in range(nq):
+        x[i] = q[cols_q[i]]
+    for i in range(na):
+        x[nq + i] = a[cols_a[i]]
+    for j in range(dof.size):
+        delta = -q[dof[j]] - gap[j]
+        f = 0.0
+        if delta > 0.0:
+            s = delta / DAMPING_ONSET
+            if s > 1.0:
+                s = 1.0
+            f = k[j] * delta - c[j] * v[dof[j]] * s
+            if not f >= 0.0:
+                f = 0.0
+        x[nq + na + j] = f / area[j]
+    for r in range(values.size):
+        acc = 0.0
+        for i in range(x.size):
+            acc += C[r, i] * x[i]
+        values[r] = acc
+
+
+@_njit
+def unit_sensors(ist, Q, V, A, sens, outbuf, m):
+    """The sensor outputs ``outbuf[5 m:]`` at the current state buffer, when not evaluated since the last step
+    (``sens``: :func:`sensor_read`'s cols_q, cols_a, dof, k, c, gap, area, C, x). Returns 0."""
+    if ist[I_STALE] != 0:
+        c = ist[I_C]
+        sensor_read(Q[c], V[c], A[c], sens[0], sens[1], sens[2], sens[3], sens[4], sens[5], sens[6], sens[7],
+                    sens[8], outbuf[5 * m:])
+        ist[I_STALE] = 0
+    return 0
+
+
+NO_SENSORS = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0),
+              np.zeros(0), np.zeros(0), np.zeros((0, 0)), np.zeros(0))   # sensor_read's arrays for none
 
 
 class UnitSteps(EngineBuffers):
@@ -123,28 +174,33 @@ class UnitSteps(EngineBuffers):
         The panel's first and last sleeper's x [m] (inputs outside: Python reports them).
     rtol : float
         Tolerance on the step size against the engine's [-].
+    sensors : tuple
+        :func:`sensor_read`'s arrays (cols_q, cols_a, dof, k, c, gap, area, C, x) of the unit's sensor
+        outputs, or :data:`NO_SENSORS`.
 
     Attributes
     ----------
     ist, fst : the integer state and float settings (``I_*``, ``F_*``).
-    outbuf : float64[5 m]   the outputs of the last step, rows :data:`OUTPUTS`.
+    outbuf : float64[5 m + n_sensors]   the outputs of the last step, rows :data:`OUTPUTS`, then the
+        sensor outputs (:func:`unit_sensors`, on demand).
     """
 
-    def __init__(self, engine, inp: np.ndarray, lo: float, hi: float, rtol: float):
+    def __init__(self, engine, inp: np.ndarray, lo: float, hi: float, rtol: float, sensors: tuple = NO_SENSORS):
         super().__init__(engine, extrapolated_inputs=True)
         if inp.dtype != np.float64 or inp.shape != (3 * engine.n,) or not inp.flags.c_contiguous:
             raise ValueError(f"UnitSteps: the input buffer must be float64[{3 * engine.n}], contiguous")
         self.inp = inp
-        self.ist = np.zeros(8, np.int64)
+        self.ist = np.zeros(9, np.int64)
         self.ist[I_START] = int(engine.extrapolate)
         self.fst = np.array([engine.h, rtol, 0.0, lo, hi, engine.speed])
-        self.outbuf = np.zeros(5 * engine.n)
+        self.sensors = tuple(sensors)
+        self.outbuf = np.zeros(5 * engine.n + self.sensors[7].shape[0])
 
     def arguments(self) -> tuple:
         """:func:`unit_step`'s arguments after ``t, h`` (current: the record's arrays may move)."""
         e = self.engine
         return (self.inp, self.ist, self.fst, self.P, self.Q, self.V, self.A, self.F, self.Fc, self.out,
-                self.trk, e._limit, e.record._args, self.tot, self.outbuf)
+                self.trk, e._limit, e.record._args, self.tot, self.outbuf, self.sensors)
 
     def read_engine(self, reserve: int = 4096) -> None:
         """The engine's state into buffer 0 (the steps go on from it); ``reserve`` record rows more."""
@@ -155,7 +211,7 @@ class UnitSteps(EngineBuffers):
             if need > e.record.capacity:
                 e.record.reserve(max(need, 2 * e.record.capacity))   # doubling: copies stay linear in rows
         ist = self.ist
-        ist[I_C], ist[I_K], ist[I_RECN], ist[I_STEPS] = 0, it.k, len(e.record), 0
+        ist[I_C], ist[I_K], ist[I_RECN], ist[I_STEPS], ist[I_STALE] = 0, it.k, len(e.record), 0, 1
         ist[I_RECCAP], ist[I_EVERY], ist[I_EXTRAP] = e.record.capacity, e.record_every, int(e.extrapolate_force)
         self.fst[F_T0] = it.t0
         self.tot[:] = 0
@@ -177,4 +233,5 @@ class UnitSteps(EngineBuffers):
             cc._load(i, int(cc.ent[1, i]))
 
 
-__all__ = ["OUTPUTS", "UNIT_ELEMENT", "UNIT_PYTHON", "UNIT_TOOK", "UnitSteps", "unit_step"]
+__all__ = ["NO_SENSORS", "OUTPUTS", "UNIT_ELEMENT", "UNIT_PYTHON", "UNIT_TOOK", "UnitSteps", "sensor_read",
+           "unit_sensors", "unit_step"]
