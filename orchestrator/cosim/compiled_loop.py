@@ -24,7 +24,7 @@ from typing import Callable
 
 import numpy as np
 
-from orchestrator.cosim.units import FmuTrack, FmuVehicle, InProcessTrack, InProcessVehicle
+from orchestrator.cosim.units import CosimError, FmuTrack, FmuVehicle, InProcessTrack, InProcessVehicle
 
 COMPILED_LOOP_ENV = "TURNOUT_COMPILED_LOOP"   # "0": the master steps the units one call at a time
 PROGRESS_STEPS = 500   # steps between progress reports (rounded up to output steps)
@@ -195,14 +195,20 @@ class FmuLoop:
             if progress is not None and k % every == 0:
                 progress(k, nsteps)
 
-
-    def _error(self, where: int, t: float, status: int):
+    def _error(self, where: int, t: float, status: int) -> CosimError:
         """The stepped loop's error for the call ``where`` that returned ``status`` in the step at ``t`` [s]."""
         force, wheels, inputs, outputs = self._ports
-        h = self._run.h
-        return {VEHICLE_SET: lambda: force.set_error(status), VEHICLE_STEP: lambda: self._vu.step_error(t, h, status),
-                VEHICLE_GET: lambda: wheels.get_error(status), TRACK_SET: lambda: inputs.set_error(status),
-                TRACK_STEP: lambda: self._tu.step_error(t, h, status),
-                TRACK_GET: lambda: outputs.get_error(status)}[where]()
+        if where == VEHICLE_SET:
+            return force.set_error(status)
+        if where == VEHICLE_STEP:
+            return self._vu.step_error(t, self._run.h, status)
+        if where == VEHICLE_GET:
+            return wheels.get_error(status)
+        if where == TRACK_SET:
+            return inputs.set_error(status)
+        if where == TRACK_STEP:
+            return self._tu.step_error(t, self._run.h, status)
+        return outputs.get_error(status)
+
 
 __all__ = ["COMPILED_LOOP_ENV", "CompiledLoop", "FmuLoop", "compiled_loop"]
