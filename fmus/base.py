@@ -112,6 +112,9 @@ def _json_object_hook(d: Dict[str, Any]) -> Any:
 class CosimSlave(Fmi2Slave):
     """Base class of this project's co-simulation slaves (see module docstring)."""
 
+    _fast = False   # compiled steps through the shim (fmus.fast): a subclass that has them sets None in
+    #                 __init__ (not registered yet) and implements _register_fast
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._units: Dict[str, str] = {}
@@ -150,6 +153,18 @@ class CosimSlave(Fmi2Slave):
                                    "(monitoring)", "-"),
                                getter=lambda: int(self._python_steps)), "-")
         self._initial_dependencies["python_steps"] = ()
+
+    def _stepped_in_python(self) -> None:
+        """Count a step Python took and, after the first, register the subclass's compiled steps with the
+        FMU's shim (``_register_fast``, which sets ``self._fast``: a ``fmus.fast.FastPath``, or False).
+        A failure there is a warning, never a failed step: the step has been taken."""
+        self._python_steps += 1
+        if self._fast is None:
+            try:
+                self._register_fast()
+            except Exception as exc:
+                self._fast = False
+                self.log_warning(f"compiled steps unavailable, stepping in Python: {type(exc).__name__}: {exc}")
 
     def get_real(self, vrs):
         """Values of the Real variables ``vrs`` (module docstring, (h))."""

@@ -680,13 +680,7 @@ class Track(CosimSlave):
             # the step has overwritten the state with a diverged one: refuse to go on
             self._failure = f"{exc} (restore an FMU state saved before to continue)"
             raise
-        self._python_steps += 1
-        if self._fast is None:
-            try:
-                self._register_fast()
-            except Exception as exc:   # an optimisation: never a failed step (the step is taken)
-                self._fast = False
-                self.log_warning(f"compiled steps unavailable, stepping in Python: {type(exc).__name__}: {exc}")
+        self._stepped_in_python()
 
     # ----------------------------------------------------------------- fast path (fmus.fast)
     def _register_fast(self) -> None:

@@ -195,13 +195,7 @@ class VehicleSlave(CosimSlave):
             stepper.set_step(step_size)
         stepper.step(self.Fz)
         self._time = current_time + step_size
-        self._python_steps += 1
-        if self._fast is None:
-            try:
-                self._register_fast()
-            except Exception as exc:   # an optimisation: never a failed step (the step is taken)
-                self._fast = False
-                self.log_warning(f"compiled steps unavailable, stepping in Python: {type(exc).__name__}: {exc}")
+        self._stepped_in_python()
 
     # -------------------------------------------------------------- fast path (fmus.fast)
     def _register_fast(self) -> None:
