@@ -106,8 +106,9 @@ def c_host_costs(out: Path) -> None:
         for fast in ("1", "0"):
             walls = {}
             for n in (300, 10300):
-                cmd = [str(host), str(unzipdir / "binaries" / "linux64" / "Track.so"), (unzipdir / "resources").as_uri(),
-                       md.guid, repr(H), str(n), "-n", "1", "-o", str(vr["wheel1_Fz"])]
+                cmd = [str(host), str(unzipdir / "binaries" / "linux64" / "Track.so"),
+                       (unzipdir / "resources").as_uri(), md.guid, repr(H), str(n), "-n", "1",
+                       "-o", str(vr["wheel1_Fz"])]
                 for i in range(4):
                     cmd += ["-l", f"{vr[f'wheel{i + 1}_x']}={x0 + 2.6 - 2.5 * (i // 2)}:2.0"]
                 best = np.inf

@@ -103,7 +103,6 @@ class FastPath:
                  lazy: int = 0, n_eager: int | None = None):
         self.lib = lib
         self.mode = np.zeros(1, np.int64)     # 1: the buffers hold the state
-        self.ctx = None                       # what ``step`` gets (set by the owner before registering)
         self._in_vr = np.ascontiguousarray(in_vrs, dtype=np.uint32)
         self._out_vr = np.ascontiguousarray(out_vrs, dtype=np.uint32)
         self.in_buf, self.out_buf = in_buf, out_buf
@@ -117,7 +116,6 @@ class FastPath:
 
     def register(self, ctx: int) -> bool:
         """Register with the shim (during a call the shim forwards to this instance); True on success."""
-        self.ctx = ctx
         spec = _Spec(ctx, self._step, ctypes.cast(self._load_cb, ctypes.c_void_p).value,
                      ctypes.cast(self._sync_cb, ctypes.c_void_p).value, self._in_vr.size, self._out_vr.size,
                      _address(self._in_vr), _address(self._out_vr), _address(self.in_buf), _address(self.out_buf),

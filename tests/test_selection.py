@@ -144,5 +144,6 @@ def test_fits_side_by_side_overlap_and_keep_their_order():
     got = side_by_side(SimpleNamespace(spare=1), {"b": lambda: fit("b"), "a": lambda: fit("a")})
     assert list(got) == ["b", "a"] and {got["a"][1], got["b"][1]} == {0, 1}
     order.clear()
-    got = side_by_side(SimpleNamespace(spare=0), {"b": lambda: order.append("b") or 2, "a": lambda: order.append("a") or 1})
+    got = side_by_side(SimpleNamespace(spare=0),
+                       {"b": lambda: order.append("b") or 2, "a": lambda: order.append("a") or 1})
     assert got == {"b": 2, "a": 1} and order == ["b", "a"]

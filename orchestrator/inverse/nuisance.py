@@ -623,4 +623,5 @@ def fit_nuisance(pool, target: Target, raw: dict, base_cmp: Comparison) -> Nuisa
 
 
 __all__ = ["NuisanceFit", "fit_nuisance", "speed_from_data", "speed_corrected", "sensor_gains", "neighbourhoods",
-           "channel_log_gains", "fit_vehicle_and_damping", "refit_accepted", "effective_samples", "resolved_sensors", "PRIORS"]
+           "channel_log_gains", "fit_vehicle_and_damping", "refit_accepted", "effective_samples", "resolved_sensors",
+           "PRIORS"]

@@ -119,7 +119,8 @@ def kernel_enabled(flag: bool | None = None) -> bool:
 
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
-_KERNEL_SOURCES = ("kernel.py", "contact.py", "ballast.py", "fused.py", "unit_step.py", "unit_cfunc.py")  # what the compiled code is made of
+# what the compiled code is made of
+_KERNEL_SOURCES = ("kernel.py", "contact.py", "ballast.py", "fused.py", "unit_step.py", "unit_cfunc.py")
 
 
 def _cache_locator():
