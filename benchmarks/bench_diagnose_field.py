@@ -39,8 +39,18 @@ single-effect share right is given over all cases and per band of the best chann
 (:data:`DETECT_BANDS`). With ``--report-only`` nothing is diagnosed; only missing
 ``detect.json`` files are computed (two truth runs a case, four for two effects).
 
+``--truth-gain``: the gain the case's *true* effects give on the diagnosis's own reference
+(:func:`orchestrator.inverse.diagnose.hypothesis_gains`: the nominal run, the same nuisance
+fit, then the truth's effects at their true values, no fitting) — what a named cause's gain
+is bounded by on that record, whatever the diagnosis does: the chain's noise and, with
+model-form mismatch, the mismatch stay in J. Cached per case folder (``truth_gain.json``);
+the summary then gives, per group, how many right answers below the acceptance's gain have
+a truth that is below it as well, and each of those cases' two gains. It says whether a
+gain below the target is the diagnosis's shortfall or the record's; it does not change the
+count against the target.
+
 Run: python benchmarks/bench_diagnose_field.py [--seeds 3] [--families a,b,...] [--workers 2] [--record]
-     [--stage all|synth|diagnose] [--report-only] [--detectability] [--out DIR]
+     [--stage all|synth|diagnose] [--report-only] [--detectability] [--truth-gain] [--out DIR]
 """
 from __future__ import annotations
 
@@ -60,7 +70,7 @@ from orchestrator.inputs.scenario import bundled_scenario, load_scenario
 from orchestrator.inputs.sensor_layout import layout_of
 from orchestrator.inputs.measured import read_measured
 from orchestrator.inverse.detectability import case_detectability
-from orchestrator.inverse.diagnose import diagnose
+from orchestrator.inverse.diagnose import diagnose, hypothesis_gains
 from orchestrator.inverse.fieldlike import (FAMILIES, SLOW_FAMILIES, FieldCase, draw_case, instrumented_sleepers,
                                             synthesize_case)
 from orchestrator.inverse.jsonable import numpy_default
@@ -73,6 +83,7 @@ NEAR = 1                # sleepers between an `unexplained` location and an off-
 GAIN_MIN, GAIN_MIN_MISMATCH = 0.80, 0.50   # the acceptance's gains without / with model-form mismatch
 SEED0 = 7000            # seed of the k-th case of a family: SEED0 + 101 k (draw_case mixes in the family)
 DETECT_VERSION = 2      # of detect.json's content: a cached file of another version is computed anew
+TRUTH_GAIN_VERSION = 1  # of truth_gain.json's content (the same rule)
 DETECT_BANDS = (0.25, 1.0)   # edges of the bands of the best channel's rho: fixed in the task (issue 14's
 #                              detectability brief) before any case's ratio was computed, not fitted to the cases
 
@@ -415,6 +426,61 @@ def detect_all(out: Path, families) -> dict:
     return found
 
 
+# ------------------------------------------------------------------------------------------ the truth's own gain
+def truth_gain_case(folder: Path, workers: int) -> tuple[dict, bool]:
+    """The gain of a case folder's true effects on the diagnosis's reference and whether it was computed now:
+    its ``truth_gain.json`` when that is for the same case, else ~50 runs (the nominal run, the nuisance fit,
+    one run of the truth), written there."""
+    truth = json.loads((folder / "case.json").read_text())
+    cache = folder / "truth_gain.json"
+    if cache.is_file():
+        old = json.loads(cache.read_text())
+        if old.get("case") == truth and old.get("version") == TRUTH_GAIN_VERSION:
+            return old, False
+    t0 = time.perf_counter()
+    got = hypothesis_gains(SCENARIO, folder / "passage.csv", [truth["effects"]], folder / "truth_gain", workers)
+    out = {"case": truth, "version": TRUTH_GAIN_VERSION, **got, "wall": time.perf_counter() - t0}
+    cache.write_text(json.dumps(out, indent=1, default=numpy_default))
+    return out, True
+
+
+def truth_gains(rows: list[dict], out: Path, workers: int) -> dict:
+    """(family, seed) -> the truth's gain (a float, or the reason it has none) of every row with effects."""
+    found = {}
+    for r in rows:
+        folder = out / f"{r['family']}_{r['seed']}"
+        if not r["truth"]["effects"] or not (folder / "passage.csv").is_file():
+            continue
+        d, computed = truth_gain_case(folder, workers)
+        h = d["hypotheses"][0]
+        found[(r["family"], r["seed"])] = h.get("gain", h.get("error"))
+        if computed:
+            print(f"{folder.name:32s} truth's own gain {_pct(h.get('gain'))}, {d['wall']:.0f} s", flush=True)
+    return found
+
+
+def _truth_gain_lines(right: list[tuple[float, dict]], need: float, truth: dict | None) -> list[str]:
+    """Per group: the named gain against the truth's own over the right answers, and of those below the gain
+    target, the ones whose truth is below it as well."""
+    if truth is None:
+        return []
+    known = [(a, r, truth[(r["family"], r["seed"])]) for a, r in right
+             if isinstance(truth.get((r["family"], r["seed"])), float)]
+    if not known:
+        return []
+    named = [(a, r, t) for a, r, t in known if r["answer"]["kind"] == "cause"]
+    out = [f"  - the truth's own gain on the diagnosis's reference: median {_pct(float(np.median([t for *_, t in known])))}"
+           + (f"; named minus truth over the {len(named)} named: median "
+              f"{100 * float(np.median([a - t for a, _, t in named])):+.1f} points, lowest "
+              f"{100 * min(a - t for a, _, t in named):+.1f}" if named else "")]
+    below = [x for x in known if x[0] < need]
+    if below:
+        cases = "; ".join(f"{r['family']} {r['seed']} {_pct(a)} (truth {_pct(t)})" for a, r, t in below)
+        out.append(f"  - of the {len(below)} below {_pct(need)}: the truth's own gain is below it too in "
+                   f"{sum(t < need for *_, t in below)}/{len(below)} (named vs truth: {cases})")
+    return out
+
+
 def _rho(x) -> str:
     return "-" if x is None else "inf" if x == float("inf") else f"{x:.2g}" if x < 0.01 else f"{x:.3g}"
 
@@ -577,7 +643,8 @@ def _answer_text(ans: dict) -> str:
                      for c in ans["causes"])
 
 
-def summary(rows: list[dict], seeds: int, wall: float | None, detect: dict | None = None) -> str:
+def summary(rows: list[dict], seeds: int, wall: float | None, detect: dict | None = None,
+            truth: dict | None = None) -> str:
     """The matrix, the share right per group, gains, misses (with their ratio rho where ``detect`` has it),
     coverage, nuisance estimates."""
     out = [matrix(rows), ""]
@@ -587,17 +654,18 @@ def summary(rows: list[dict], seeds: int, wall: float | None, detect: dict | Non
     gains = {}
     for r in rows:
         if r["truth"]["effects"] and r["right"] and r["answer"]["gain"] is not None:
-            gains.setdefault(_group(r["family"]), []).append((r["answer"]["gain"], r["answer"]))
+            gains.setdefault(_group(r["family"]), []).append((r["answer"]["gain"], r))
     for g, v in gains.items():
         need = GAIN_MIN_MISMATCH if "with model mismatch" in g else GAIN_MIN
         x = [a for a, _ in v]
-        below = [ans for a, ans in v if a < need and ans["kind"] == "cause"]
+        below = [r["answer"] for a, r in v if a < need and r["answer"]["kind"] == "cause"]
         quiet = sum(bool(ans.get("rest_quiet")) for ans in below)
         out.append(f"- gain of right answers, {g}: min {_pct(min(x))}, median {_pct(float(np.median(x)))}; "
                    f">= {_pct(need)} in {sum(a >= need for a in x)}/{len(x)}"
                    + (f"; of the {len(below)} named below it, {quiet} leave the rest at the noise level "
                       f"and {len(below) - quiet} report a residual above it with where it "
                       "lives" if below else ""))
+        out += _truth_gain_lines(v, need, truth)
     inside, total, inside_id, total_id = (sum(r["coverage"][i] for r in rows) for i in range(4))
     out.append(f"- interval coverage: {inside}/{total} intervals of named causes that match the truth contain it "
                f"({inside_id}/{total_id} of those flagged identifiable)" if total
@@ -640,6 +708,8 @@ def main() -> None:
     ap.add_argument("--note", default="", help="a line recorded under the command (with --record)")
     ap.add_argument("--detectability", action="store_true",
                     help="the effect's signature-to-noise ratio of every case folder in OUT (cached in detect.json)")
+    ap.add_argument("--truth-gain", action="store_true",
+                    help="the gain of each case's true effects on the diagnosis's reference (cached in truth_gain.json)")
     ap.add_argument("--stage", choices=("all", "synth", "diagnose"), default="all",
                     help="synth: write the passages only; diagnose: diagnose those an earlier synth wrote")
     args = ap.parse_args()
@@ -661,7 +731,8 @@ def main() -> None:
         if len(rows) > len(fresh):
             wall = None   # then the summary sums the diagnoses' own wall times
     detect = detect_all(out, families) if args.detectability else None
-    text = summary(rows, args.seeds, wall, detect)
+    truth = truth_gains(rows, out, args.workers) if args.truth_gain else None
+    text = summary(rows, args.seeds, wall, detect, truth)
     print(text)
     if detect is not None:
         detect_text = detect_report(rows, detect)
@@ -681,7 +752,8 @@ def record(args, families: list[str], text: str, detectability: bool) -> None:
     else:
         title = "Diagnosis on field-like passages: confusion matrix"
         cmd = f"python benchmarks/bench_diagnose_field.py --seeds {args.seeds} --workers {args.workers}" + (
-            f" --families {args.families}" if families != list(FAMILIES) else "")
+            f" --families {args.families}" if families != list(FAMILIES) else "") + (
+            f" --report-only --out {args.out}" if args.report_only else "") + (" --truth-gain" if args.truth_gain else "")
     with Path(__file__).with_name("RESULTS.md").open("a") as f:
         note = f"{args.note}\n\n" if args.note else ""
         f.write(f"\n## {title} — {stamp}, {machine}\n\n`{cmd}`\n\n{note}{text}\n")

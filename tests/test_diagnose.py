@@ -39,7 +39,8 @@ import yaml
 
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario
 from orchestrator.inputs.sensor_layout import layout_of, resolve
-from orchestrator.inverse.diagnose import diagnose
+from orchestrator.inputs.errors import UserInputError
+from orchestrator.inverse.diagnose import diagnose, hypothesis_gains
 from orchestrator.inverse.synthetic import hidden_effect, synthesize
 from track.model import build_track
 
@@ -165,6 +166,16 @@ def test_void_through_another_model_is_named_with_its_sleeper(tmp_path):
     assert result["named_cause"] == a["causes"][0]
     assert result["gain"]["total"] >= 0.5, result["gain"]
     _check_uncertainty(a["causes"][0])
+    # hypothesis_gains (what benchmarks/bench_diagnose_field.py --truth-gain uses): a consistency check, two code
+    # paths of ours -- the named cause as a hypothesis on the same reference (the same nominal run and nuisance
+    # fit) gives the diagnosis's own gain; 1e-9: the same runs, the parameters round-tripped through JSON exactly,
+    # the only difference the order in which the two paths may sum a channel's residual
+    got = hypothesis_gains(SCENARIO, passage, [a["causes"]], tmp_path / "hyp", workers=2)
+    assert got["hypotheses"][0]["gain"] == pytest.approx(result["gain"]["total"], abs=1e-9), (got, result["gain"])
+    assert got["objective_nominal"] == pytest.approx(result["baseline"]["objective"], rel=1e-12)
+    with pytest.raises(UserInputError, match="'ballast_hole' is not one of"):   # before any run
+        hypothesis_gains(SCENARIO, passage, [[{"cause": "ballast_hole", "sleeper": 20, "parameters": {}}]],
+                         tmp_path / "hyp")
 
 
 def test_void_and_soft_pad_next_to_it_are_both_named(tmp_path):

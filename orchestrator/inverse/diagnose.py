@@ -99,7 +99,7 @@ from typing import Callable
 import numpy as np
 
 from orchestrator.cosim.sensing import variant_for_speed
-from orchestrator.inputs.causes import Candidate, candidates, kind_of
+from orchestrator.inputs.causes import CATALOGUE, Candidate, candidates, kind_of
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inverse.diagnosis import Answer, Baseline, CauseFit, Diagnosis, Gain, Passage
 from orchestrator.inverse.jsonable import numpy_default
@@ -664,5 +664,60 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
     return result
 
 
-__all__ = ["diagnose", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "MAX_CAUSES", "SECOND_ROUND",
+def hypothesis_gains(scenario_path, measured_path, hypotheses, out_dir, workers: int | None = None,
+                     scheduler: str | None = None) -> dict:
+    """How much of the misfit given cause sets explain, measured as :func:`diagnose` measures a named cause's.
+
+    Steps 1-2 of the diagnosis (the nominal run, the nuisance fit: the same reference, the same
+    numbers), then one run per hypothesis: its causes applied to the reference at the given
+    values, no fitting. A hypothesis's gain is ``1 - J / J_nominal``, the definition of
+    ``diagnosis.json``'s ``gain.total``. For a cause a user knows of (an inspection found a
+    void) — and for the benchmark of issue 14, which asks what the *true* effects would gain on
+    a record (``benchmarks/bench_diagnose_field.py --truth-gain``): a named cause's gain is
+    bounded by that, however good the diagnosis.
+
+    Parameters
+    ----------
+    scenario_path, measured_path, out_dir, workers, scheduler
+        As for :func:`diagnose` (``baseline.json`` is written to ``out_dir``).
+    hypotheses : list of list of dict
+        Each a list of causes ``{"cause", "sleeper" (or None), "parameters"}`` (the entries of
+        ``diagnosis.json``'s ``answer.causes`` have that form).
+
+    Returns
+    -------
+    dict
+        ``objective_nominal``, ``objective_reference`` (with the nuisance estimates), and
+        ``hypotheses``: per hypothesis ``{"objective", "gain"}``, or ``{"error"}`` naming why its
+        run cannot be compared.
+    """
+    from orchestrator.sweeps.executors import make_executor
+
+    for causes in hypotheses:
+        for c in causes:
+            if c.get("cause") not in CATALOGUE:
+                raise UserInputError(f"hypothesis cause {c.get('cause')!r} is not one of {', '.join(CATALOGUE)}")
+    inp = _read_inputs(scenario_path, measured_path, out_dir, ())
+    executor = make_executor(workers, scheduler)
+    try:
+        pool = Pool(executor, str(scenario_path))
+        base, _ = _baseline(pool, inp)
+        ref_raw, ref, _ = _nuisance(pool, inp, base)
+        raws = []
+        for causes in hypotheses:
+            raw = ref_raw
+            for c in causes:
+                kind = kind_of(Candidate(c["cause"], c.get("sleeper")))
+                raw = kind.apply(raw, c.get("sleeper"), kind.values_of(c["parameters"]))
+            raws.append(raw)
+        got = pool.map(raws, then=lambda run: checked_comparison(inp.target, run, ref.cmp))
+    finally:
+        executor.shutdown(wait=True, cancel_futures=True)
+    j0 = base.cmp.objective
+    return {"objective_nominal": j0, "objective_reference": ref.cmp.objective,
+            "hypotheses": [{"objective": cmp.objective, "gain": 1.0 - cmp.objective / j0 if j0 > 0 else 0.0}
+                           if cmp is not None else {"error": why} for cmp, why in got]}
+
+
+__all__ = ["diagnose", "hypothesis_gains", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "MAX_CAUSES", "SECOND_ROUND",
            "SECOND_CONFIRM"]
