@@ -469,7 +469,8 @@ def _truth_gain_lines(right: list[tuple[float, dict]], need: float, truth: dict 
     if not known:
         return []
     named = [(a, r, t) for a, r, t in known if r["answer"]["kind"] == "cause"]
-    out = [f"  - the truth's own gain on the diagnosis's reference: median {_pct(float(np.median([t for *_, t in known])))}"
+    median_truth = float(np.median([t for *_, t in known]))
+    out = [f"  - the truth's own gain on the diagnosis's reference: median {_pct(median_truth)}"
            + (f"; named minus truth over the {len(named)} named: median "
               f"{100 * float(np.median([a - t for a, _, t in named])):+.1f} points, lowest "
               f"{100 * min(a - t for a, _, t in named):+.1f}" if named else "")]
@@ -709,7 +710,8 @@ def main() -> None:
     ap.add_argument("--detectability", action="store_true",
                     help="the effect's signature-to-noise ratio of every case folder in OUT (cached in detect.json)")
     ap.add_argument("--truth-gain", action="store_true",
-                    help="the gain of each case's true effects on the diagnosis's reference (cached in truth_gain.json)")
+                    help="the gain of each case's true effects on the diagnosis's reference "
+                         "(cached in truth_gain.json)")
     ap.add_argument("--stage", choices=("all", "synth", "diagnose"), default="all",
                     help="synth: write the passages only; diagnose: diagnose those an earlier synth wrote")
     args = ap.parse_args()
@@ -753,7 +755,8 @@ def record(args, families: list[str], text: str, detectability: bool) -> None:
         title = "Diagnosis on field-like passages: confusion matrix"
         cmd = f"python benchmarks/bench_diagnose_field.py --seeds {args.seeds} --workers {args.workers}" + (
             f" --families {args.families}" if families != list(FAMILIES) else "") + (
-            f" --report-only --out {args.out}" if args.report_only else "") + (" --truth-gain" if args.truth_gain else "")
+            f" --report-only --out {args.out}" if args.report_only else "") + (
+            " --truth-gain" if args.truth_gain else "")
     with Path(__file__).with_name("RESULTS.md").open("a") as f:
         note = f"{args.note}\n\n" if args.note else ""
         f.write(f"\n## {title} — {stamp}, {machine}\n\n`{cmd}`\n\n{note}{text}\n")

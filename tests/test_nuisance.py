@@ -246,3 +246,29 @@ def test_refit_accepted_moves_only_the_free_entries_to_their_optimum():
     assert abs(got[0] - 0.7) < 0.02 and abs(got[2] - 0.4) < 0.02, got
     best = np.array([0.7, 0.5, 0.4])
     assert np.array_equal(refit_accepted(residuals, best, free), best)
+
+
+def test_reported_interval_holds_what_each_sensor_group_alone_would_fit():
+    """The reported nuisance interval (nuisance._reported) against a closed form: a linear model, one parameter,
+    two sensor groups whose data want u = 0.3 (group A) and u = 0.7 (group B), no noise. The joint fit is u = 0.5;
+    the statistical interval passed in is the point u itself, so only the groups' term can widen it. Deleting
+    one group leaves the other's value, so the jackknife variance is, by
+    hand, (G - 1) / G * (0.2^2 + 0.2^2) = 0.04 and the half-width t_{0.95,1} * 0.2 = 6.314 * 0.2 = 1.263
+    (t_{0.95,1} = tan(0.45 pi), the Cauchy quantile). Tolerance 1e-9: exact arithmetic up to round-off."""
+    from types import SimpleNamespace
+
+    from orchestrator.inverse.nuisance import _reported
+
+    n = 50
+    J = np.ones((2 * n, 1))
+    u = np.array([0.5])
+    y = np.r_[np.full(n, 0.3), np.full(n, 0.7)]
+    r = J @ u - y
+    target = SimpleNamespace(layout=SimpleNamespace(groups={"a1": "A", "b1": "B"}))
+    cmp = SimpleNamespace(channels={"a1": {}, "b1": {}}, residuals={"a1": r[:n], "b1": r[n:]})
+    lo, hi = _reported(J, r, u, u.copy(), u.copy(), target, cmp)
+    half = math.tan(0.45 * math.pi) * 0.2
+    assert lo[0] == pytest.approx(0.5 - half, abs=1e-9) and hi[0] == pytest.approx(0.5 + half, abs=1e-9)
+    # a wider statistical interval is kept as it is
+    lo2, hi2 = _reported(J, r, u, np.array([-5.0]), np.array([6.0]), target, cmp)
+    assert (lo2[0], hi2[0]) == (-5.0, 6.0)

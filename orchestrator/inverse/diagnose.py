@@ -719,5 +719,5 @@ def hypothesis_gains(scenario_path, measured_path, hypotheses, out_dir, workers:
                            if cmp is not None else {"error": why} for cmp, why in got]}
 
 
-__all__ = ["diagnose", "hypothesis_gains", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "MAX_CAUSES", "SECOND_ROUND",
-           "SECOND_CONFIRM"]
+__all__ = ["diagnose", "hypothesis_gains", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "MAX_CAUSES",
+           "SECOND_ROUND", "SECOND_CONFIRM"]
