@@ -388,15 +388,21 @@ def passage_deviation(path: Path, det, case: FieldCase, types: dict) -> float:
     return worst
 
 
+def _cached(folder: Path, name: str, version: int) -> tuple[dict, Path, dict | None]:
+    """(the folder's ``case.json``, the cache file ``name`` in it, its content when that is for the same case and
+    ``version``, else None)."""
+    truth = json.loads((folder / "case.json").read_text())
+    cache = folder / name
+    old = json.loads(cache.read_text()) if cache.is_file() else None
+    return truth, cache, old if old and old.get("case") == truth and old.get("version") == version else None
+
+
 def detect_case(sc, folder: Path, types: dict) -> tuple[dict, bool]:
     """The detectability of a case folder's ``case.json`` and whether it was computed now: its ``detect.json``
     when that is for the same case, else two (or four) truth runs, written there."""
-    truth = json.loads((folder / "case.json").read_text())
-    cache = folder / "detect.json"
-    if cache.is_file():
-        old = json.loads(cache.read_text())
-        if old.get("case") == truth and old.get("version") == DETECT_VERSION:
-            return old, False
+    truth, cache, old = _cached(folder, "detect.json", DETECT_VERSION)
+    if old is not None:
+        return old, False
     case = FieldCase.from_dict(truth)
     t0 = time.perf_counter()
     det = case_detectability(sc, case)
@@ -431,12 +437,9 @@ def truth_gain_case(folder: Path, workers: int) -> tuple[dict, bool]:
     """The gain of a case folder's true effects on the diagnosis's reference and whether it was computed now:
     its ``truth_gain.json`` when that is for the same case, else ~50 runs (the nominal run, the nuisance fit,
     one run of the truth), written there."""
-    truth = json.loads((folder / "case.json").read_text())
-    cache = folder / "truth_gain.json"
-    if cache.is_file():
-        old = json.loads(cache.read_text())
-        if old.get("case") == truth and old.get("version") == TRUTH_GAIN_VERSION:
-            return old, False
+    truth, cache, old = _cached(folder, "truth_gain.json", TRUTH_GAIN_VERSION)
+    if old is not None:
+        return old, False
     t0 = time.perf_counter()
     got = hypothesis_gains(SCENARIO, folder / "passage.csv", [truth["effects"]], folder / "truth_gain", workers)
     out = {"case": truth, "version": TRUTH_GAIN_VERSION, **got, "wall": time.perf_counter() - t0}
