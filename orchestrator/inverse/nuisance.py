@@ -104,6 +104,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from orchestrator.inputs.causes import CATALOGUE
+from orchestrator.inverse.jackknife import group_jackknife, residual_groups
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import comparison
 from orchestrator.inverse.significance import LOUD_FACTOR, loudness
@@ -435,7 +436,8 @@ def _reported(J: np.ndarray, r: np.ndarray, u: np.ndarray, lo: np.ndarray, hi: n
               cmp: Comparison) -> tuple[np.ndarray, np.ndarray]:
     """The reported 90 % intervals (unit cube): :func:`_intervals`' widened, where the sensor groups disagree
     more, to ``u +- t_{0.95,G-1} sd_groups`` — the delete-one-group jackknife a named cause's interval takes
-    too (:func:`orchestrator.inverse.uncertainty.group_jackknife`, no runs; its module doc, 2.).
+    too (:func:`orchestrator.inverse.jackknife.group_jackknife`, no runs; :mod:`orchestrator.inverse.uncertainty`,
+    its module doc, 2.).
 
     Why: on field data the residual is model-form error as much as noise, and the statistical
     interval alone assumes the model right. Measured on the 51 field-like passages of issue 14
@@ -446,8 +448,6 @@ def _reported(J: np.ndarray, r: np.ndarray, u: np.ndarray, lo: np.ndarray, hi: n
     another question from how well it is determined.
     """
     from scipy.special import stdtrit   # Student-t quantile (scipy.stats costs ~1 s to import)
-
-    from orchestrator.inverse.uncertainty import group_jackknife, residual_groups
 
     groups = residual_groups(target, cmp)
     if groups.size != r.size:

@@ -82,13 +82,11 @@ from __future__ import annotations
 import numpy as np
 
 from orchestrator.inputs.causes import kind_of
+from orchestrator.inverse.jackknife import BOUND_TOL, RCOND, group_jackknife, held_at_bound, residual_groups
 
 Z90 = 1.6449         # two-sided 90 % quantile of the standard normal
 IDENT_SHARE = 0.5    # an interval covering this share of the bounds (unit cube) or more: not identifiable
-RCOND = 1e-10        # eigenvalues of J^T J below this x the largest: a direction the data do not see
 UNIFORM_SD = 1.0 / np.sqrt(12.0)   # sd of a uniform prior over a range of width 1
-BOUND_TOL = 0.01     # a parameter this close to a face of the unit cube is on it: half the Jacobian's step
-#                      (fitting.STEP), closer than the forward difference resolves
 
 
 def _prior_sd() -> dict:
@@ -113,57 +111,6 @@ def unit_covariance(jac: np.ndarray, r: np.ndarray, n_eff: float) -> np.ndarray:
     blind = ((vec ** 2)[:, ~seen] > 1e-12).any(axis=1)
     cov[blind, blind] = np.inf
     return tau * s2 * cov
-
-
-def group_jackknife(jac: np.ndarray, r: np.ndarray, groups: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, int]:
-    """Delete-one-sensor-group jackknife variance of the fitted unit-cube point (module doc, 2.; no runs).
-
-    Parameters
-    ----------
-    jac : ndarray, shape (n, k)
-        Jacobian of the weighted residuals in the unit cube at ``u``.
-    r : ndarray, shape (n,)
-        The weighted residuals at ``u``.
-    groups : ndarray, shape (n,)
-        Sensor group of each residual entry.
-    u : ndarray, shape (k,)
-        The fitted point (the refits are clipped to ``[0, 1]`` as the bounded refit would be).
-
-    Returns
-    -------
-    (ndarray, int)
-        ``(G - 1) / G * sum_g (u_(-g) - u)^2`` per parameter, and G, the groups holding
-        residual (a variance of zeros when G < 2).
-    """
-    groups = np.asarray(groups)
-    labels = [g for g in dict.fromkeys(groups.tolist()) if np.any(r[groups == g] != 0.0)]
-    if len(labels) < 2:
-        return np.zeros(jac.shape[1]), len(labels)
-    free = ~held_at_bound(jac, r, u)
-    jf = jac[:, free]
-    a_all, grad_all = jf.T @ jf, jf.T @ r
-    top = max(float(np.linalg.eigvalsh(a_all).max()), 1e-300) if free.any() else 1.0
-    shifts = []
-    for g in labels:
-        m = groups == g
-        lam, vec = np.linalg.eigh(a_all - jf[m].T @ jf[m])
-        inv = np.where(lam > RCOND * top, 1.0 / np.maximum(lam, 1e-300), 0.0)   # unseen without g: no refit
-        step = np.zeros_like(u)
-        step[free] = -((vec * inv) @ vec.T) @ (grad_all - jf[m].T @ r[m])
-        shifts.append(np.clip(u + step, 0.0, 1.0) - u)
-    n_g = len(labels)
-    return (n_g - 1) / n_g * np.sum(np.square(shifts), axis=0), n_g
-
-
-def held_at_bound(jac: np.ndarray, r: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Parameters the bounded fit holds on a face of the cube: within :data:`BOUND_TOL` of it, the gradient pushing out.
-
-    A bounded refit keeps them there (a void point resting on the bed stays at gap 0),
-    so the linearised refits and the held-nuisance shifts move only the others; letting
-    them cross the face would let the free ones compensate a move the fit cannot make.
-    """
-    grad = jac.T @ r      # d(|r|^2 / 2) / du: descent is -grad
-    return ((u <= BOUND_TOL) & (grad > 0)) | ((u >= 1.0 - BOUND_TOL) & (grad < 0))
 
 
 def nuisance_jacobian(fitter, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -225,12 +172,6 @@ def nuisance_covariance(jac: np.ndarray, jac_nuis: np.ndarray, sd: np.ndarray,
     sens = np.zeros((k, jac_nuis.shape[1]))
     sens[free] = -((vec * inv) @ vec.T) @ (jf.T @ jac_nuis)
     return (sens * np.square(sd)) @ sens.T
-
-
-def residual_groups(target, cmp) -> np.ndarray:
-    """The sensor group of each entry of ``target.weighted_residuals(cmp)`` (same channel order and lengths)."""
-    return np.concatenate([np.full(np.asarray(cmp.residuals[k]).size, target.layout.groups[k], dtype=object)
-                           for k in cmp.channels])
 
 
 def half_widths(cov_u: np.ndarray, var_groups: np.ndarray | None = None, n_groups: int = 0) -> dict:
