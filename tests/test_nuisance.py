@@ -252,9 +252,9 @@ def test_reported_interval_holds_what_each_sensor_group_alone_would_fit():
     """The reported nuisance interval (nuisance._reported) against a closed form: a linear model, one parameter,
     two sensor groups whose data want u = 0.3 (group A) and u = 0.7 (group B), no noise. The joint fit is u = 0.5;
     the statistical interval passed in is the point u itself, so only the groups' term can widen it. Deleting
-    one group leaves the other's value, so the jackknife variance is, by
-    hand, (G - 1) / G * (0.2^2 + 0.2^2) = 0.04 and the half-width t_{0.95,1} * 0.2 = 6.314 * 0.2 = 1.263
-    (t_{0.95,1} = tan(0.45 pi), the Cauchy quantile). Tolerance 1e-9: exact arithmetic up to round-off."""
+    one group leaves the other's value, so the jackknife variance is, by hand, (G - 1) / G * (0.2^2 + 0.2^2) =
+    0.04 and the half-width t_{0.95,1} * 0.2 = 6.314 * 0.2 = 1.263 (t_{0.95,1} = tan(0.45 pi), the Cauchy
+    quantile). Tolerance 1e-9: exact arithmetic up to round-off."""
     from types import SimpleNamespace
 
     from orchestrator.inverse.nuisance import _reported
