@@ -297,6 +297,7 @@ class Track(CosimSlave):
         self._fast = None         # FastPath once registered (after the first step); False: none here
         self._unit = None         # track.unit_step.UnitSteps of the current TrackCosim (the fast path's)
         self._ctx = None          # its arguments' table for the compiled C step (track.unit_cfunc.pack)
+        self._pack = None         # track.unit_cfunc.pack, once that module is loaded (_register_fast)
         self._ctx_record = None   # the record arrays packed into it
         self._model = None        # TrackModel, built at exitInitializationMode
         self._built = None        # the TrackParams it was built from

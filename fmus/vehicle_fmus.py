@@ -83,6 +83,7 @@ class VehicleSlave(CosimSlave):
         self._fast = None          # FastPath once registered (after the first step); False: none here
         self._lti = LtiStep()      # the shim's step of the zoh system (filled by _fast_load)
         self._lti_arrays = ()      # the arrays it points into (kept alive)
+        self._lti_stepper = None   # the stepper whose arrays those are
         self._time_buf = np.zeros(1)
 
         self.add_parameter("speed", "constant vehicle speed along increasing track coordinate x",
@@ -221,18 +222,20 @@ class VehicleSlave(CosimSlave):
         if current:
             return True
         m = len(self.Fz)
-        G = np.ascontiguousarray(st._G, dtype=float)
-        ny = st._ynew.size
+        G, z, _, _, ynew, Y_wheel, wheel, wheel_offset = st.discrete_system()
+        G = np.ascontiguousarray(G, dtype=float)
+        ny = ynew.size
         Y = np.zeros((3 * m, ny))
-        Y[m:] = st._Y
+        Y[m:] = Y_wheel
         v = self._values
-        off = np.concatenate([[v["x0"] + self._offsets[i] for i in range(m)], st._wheel_offset])
+        off = np.concatenate([[v["x0"] + self._offsets[i] for i in range(m)], wheel_offset])
         tco = np.concatenate([np.full(m, float(v["speed"])), np.zeros(2 * m)])
         out = self._fast.out_buf
         out[:m] = [self._wheel_x(i) for i in range(m)]
-        out[m:] = st._wheel
+        out[m:] = wheel
         self._time_buf[0] = self._time
-        self._lti_arrays = (G, st._z, st._ynew, Y, off, tco, out, self.Fz, self._time_buf)
+        self._lti_stepper = st
+        self._lti_arrays = (G, z, ynew, Y, off, tco, out, self.Fz, self._time_buf)
         a = [x.ctypes.data for x in self._lti_arrays]
         lti = self._lti
         lti.ny, lti.nz, lti.nout = ny, G.shape[1], 3 * m
@@ -243,9 +246,9 @@ class VehicleSlave(CosimSlave):
     def _fast_sync(self) -> None:
         """The shim's ``sync``: the steps' wheel outputs, time and count into the stepper."""
         st, m = self._stepper, len(self.Fz)
-        if st is None or not self._lti_arrays or self._lti_arrays[1] is not st._z:
+        if st is None or st is not self._lti_stepper:   # rebuilt since: the steps were the old stepper's
             return
-        st._wheel[:] = self._fast.out_buf[m:]
+        st.wheel_z[:], st.wheel_vz[:] = self._fast.out_buf[m:2 * m], self._fast.out_buf[2 * m:]
         self._time = float(self._time_buf[0])
         st.steps += int(self._lti.steps)
         self._lti.steps = 0

@@ -319,11 +319,13 @@ def test_compiled_steps_give_the_python_steps_numbers(instances, monkeypatch, tm
     Same kernel on the same state: outputs, record and counters equal to the last bit; the output
     python_steps shows the compiled path took all but the first step."""
     runs = {}
-    for mode in ("0", "1"):
+    # the first run warms the process-wide cache of influence rows (track.dynamics._shared_factor), whose
+    # solves the counter counts: run alone, the Python path solved 68 rows more than the compiled one after it
+    for j, mode in enumerate(("0", "0", "1")):
         monkeypatch.setenv("XPANEL_FMU_FAST", mode)
-        inst = instances("track2", f"compiled_{mode}_{extrapolate}").init(
+        inst = instances("track2", f"compiled_{j}_{extrapolate}").init(
             speed=5.0, extrapolate=extrapolate, auto_offset=True, record_every=1,
-            record_file=str(tmp_path / f"record_{mode}.npz"))
+            record_file=str(tmp_path / f"record_{j}.npz"))
         first = drive(inst, 0, 500)
         state = inst.fmu.getFMUstate()
         ahead = drive(inst, 500, 150)
@@ -331,7 +333,7 @@ def test_compiled_steps_give_the_python_steps_numbers(instances, monkeypatch, tm
         again = drive(inst, 500, 300)
         counters = inst.fmu.getInteger([inst.vr[k] for k in ("track_steps", "linear_solves", "python_steps")])
         inst.close()
-        runs[mode] = (np.vstack([first, ahead, again]), counters, np.load(tmp_path / f"record_{mode}.npz"))
+        runs[mode] = (np.vstack([first, ahead, again]), counters, np.load(tmp_path / f"record_{j}.npz"))
     (out0, c0, rec0), (out1, c1, rec1) = runs["0"], runs["1"]
     assert np.ptp(out0[:, 0]) > 100.0                 # the forces really vary (N)
     assert np.array_equal(out0, out1)

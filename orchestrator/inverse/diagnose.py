@@ -691,6 +691,7 @@ def hypothesis_gains(scenario_path, measured_path, hypotheses, out_dir, workers:
         ``hypotheses``: per hypothesis ``{"objective", "gain"}``, or ``{"error"}`` naming why its
         run cannot be compared.
     """
+    from orchestrator.inverse.synthetic import Effect
     from orchestrator.sweeps.executors import make_executor
 
     for causes in hypotheses:
@@ -707,8 +708,7 @@ def hypothesis_gains(scenario_path, measured_path, hypotheses, out_dir, workers:
         for causes in hypotheses:
             raw = ref_raw
             for c in causes:
-                kind = kind_of(Candidate(c["cause"], c.get("sleeper")))
-                raw = kind.apply(raw, c.get("sleeper"), kind.values_of(c["parameters"]))
+                raw = Effect(c["cause"], c.get("sleeper"), c["parameters"]).apply(raw)
             raws.append(raw)
         got = pool.map(raws, then=lambda run: checked_comparison(inp.target, run, ref.cmp))
     finally:

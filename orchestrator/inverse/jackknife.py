@@ -56,6 +56,14 @@ def group_jackknife(jac: np.ndarray, r: np.ndarray, groups: np.ndarray, u: np.nd
     return (n_g - 1) / n_g * np.sum(np.square(shifts), axis=0), n_g
 
 
+def group_half_width(var_groups: np.ndarray, n_groups: int) -> np.ndarray:
+    """The 90 % half-width of the groups' spread, ``t_{0.95,G-1} sd_groups`` (few clusters: the Student
+    quantile; :mod:`orchestrator.inverse.uncertainty`, module doc, 2.); needs ``n_groups >= 2``."""
+    from scipy.special import stdtrit   # Student-t quantile (scipy.stats costs ~1 s to import)
+
+    return float(stdtrit(n_groups - 1, 0.95)) * np.sqrt(np.maximum(var_groups, 0.0))
+
+
 def held_at_bound(jac: np.ndarray, r: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Parameters the bounded fit holds on a face of the cube: within :data:`BOUND_TOL` of it, the gradient pushing out.
 
@@ -73,4 +81,4 @@ def residual_groups(target, cmp) -> np.ndarray:
                            for k in cmp.channels])
 
 
-__all__ = ["group_jackknife", "held_at_bound", "residual_groups", "RCOND", "BOUND_TOL"]
+__all__ = ["group_half_width", "group_jackknife", "held_at_bound", "residual_groups", "RCOND", "BOUND_TOL"]

@@ -104,7 +104,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from orchestrator.inputs.causes import CATALOGUE
-from orchestrator.inverse.jackknife import group_jackknife, residual_groups
+from orchestrator.inverse.jackknife import group_half_width, group_jackknife, residual_groups
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import comparison
 from orchestrator.inverse.significance import LOUD_FACTOR, loudness
@@ -447,15 +447,13 @@ def _reported(J: np.ndarray, r: np.ndarray, u: np.ndarray, lo: np.ndarray, hi: n
     (:func:`_accepted`) still uses the statistical interval: whether the data want a value is
     another question from how well it is determined.
     """
-    from scipy.special import stdtrit   # Student-t quantile (scipy.stats costs ~1 s to import)
-
     groups = residual_groups(target, cmp)
     if groups.size != r.size:
         return lo, hi
     var_g, n_g = group_jackknife(J, r, groups, u)
     if n_g < 2:
         return lo, hi
-    half = float(stdtrit(n_g - 1, 0.95)) * np.sqrt(np.maximum(var_g, 0.0))
+    half = group_half_width(var_g, n_g)
     return np.minimum(lo, u - half), np.maximum(hi, u + half)
 
 

@@ -82,7 +82,8 @@ from __future__ import annotations
 import numpy as np
 
 from orchestrator.inputs.causes import kind_of
-from orchestrator.inverse.jackknife import BOUND_TOL, RCOND, group_jackknife, held_at_bound, residual_groups
+from orchestrator.inverse.jackknife import (BOUND_TOL, RCOND, group_half_width, group_jackknife, held_at_bound,
+                                            residual_groups)
 
 Z90 = 1.6449         # two-sided 90 % quantile of the standard normal
 IDENT_SHARE = 0.5    # an interval covering this share of the bounds (unit cube) or more: not identifiable
@@ -186,9 +187,7 @@ def half_widths(cov_u: np.ndarray, var_groups: np.ndarray | None = None, n_group
     noise = Z90 * np.sqrt(np.maximum(np.diag(cov_u), 0.0))
     if var_groups is None or n_groups < 2:
         return {"noise": noise.tolist(), "sensor_groups": None, "half": noise}
-    from scipy.special import stdtrit   # Student-t quantile (scipy.stats costs ~1 s to import)
-
-    grp = float(stdtrit(n_groups - 1, 0.95)) * np.sqrt(np.maximum(var_groups, 0.0))
+    grp = group_half_width(var_groups, n_groups)
     return {"noise": noise.tolist(), "sensor_groups": grp.tolist(), "half": np.maximum(noise, grp)}
 
 
