@@ -62,6 +62,13 @@ module that applies it):
    both chi-square and J; the named entry then carries the refitted parameters, its intervals at them
    (given the other cause as it was then) and the values it was named with under
    ``evidence.refit``. Its naming evidence and per-cause gain stay those of its round.
+5c. **Nuisance again** (:func:`_nuisance_again`,
+   :func:`orchestrator.inverse.nuisance.refit_with_causes`): with a cause named, the
+   vehicle, damping, speed and shift values are fitted once more, as in step 2, on the
+   model with the named causes (from step 2's values; the causes' parameters stay), and
+   kept when both chi-square and J fall: step 2 runs before any cause, so a value that
+   can imitate part of a track effect took it up, or was refused, pressed against its box
+   by it. The reported nuisance estimates and the extended model are then the refit's.
 6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,
    identifiability and which sensors would pin it:
    :mod:`orchestrator.inverse.uncertainty`); else ``none`` when the residual is at the
@@ -103,6 +110,7 @@ from orchestrator.inputs.causes import CATALOGUE, Candidate, candidates, kind_of
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inverse.diagnosis import Answer, Baseline, CauseFit, Diagnosis, Gain, Passage
 from orchestrator.inverse.jsonable import numpy_default
+from orchestrator.inverse.nuisance import NuisanceFit
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
 from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFitter, Round, cause_stages, select,
@@ -259,17 +267,30 @@ def _baseline(pool: Pool, inp: _Inputs) -> tuple[Evaluated, Baseline]:
     return base, Baseline.from_json(json.loads(text))
 
 
-def _nuisance(pool: Pool, inp: _Inputs, base: Evaluated) -> tuple[dict, Evaluated, dict | None]:
+def _nuisance(pool: Pool, inp: _Inputs, base: Evaluated) -> tuple[dict, Evaluated, NuisanceFit]:
     """Step 2: the nuisance parameters, fitted before any cause (:mod:`orchestrator.inverse.nuisance`).
 
     Output: the reference scenario the causes are screened on (the nominal one with the
-    nuisance estimates), its evaluation, and the nuisance estimates' JSON. Sets the channel
+    nuisance estimates), its evaluation, and the nuisance estimates. Sets the channel
     gains on ``inp.target``.
     """
     from orchestrator.inverse.nuisance import fit_nuisance
 
     nz = fit_nuisance(pool, inp.target, inp.raw0, base.cmp)
-    return nz.raw, Evaluated(Candidate("none"), np.zeros(0), nz.cmp, 0, "nominal"), nz.to_json()
+    return nz.raw, Evaluated(Candidate("none"), np.zeros(0), nz.cmp, 0, "nominal"), nz
+
+
+def _nuisance_again(pool: Pool, inp: _Inputs, nz: NuisanceFit, ext_raw: dict,
+                    final: Comparison) -> tuple[NuisanceFit, dict, Comparison]:
+    """Step 5c: the nuisance values fitted again on the model with the named causes (module doc).
+
+    Output: the nuisance estimates, the extended raw scenario and its comparison — the refit's
+    when it lowers both chi-square and J, else those given.
+    """
+    from orchestrator.inverse.nuisance import refit_with_causes
+
+    got = refit_with_causes(pool, inp.target, nz, ext_raw, final)
+    return (nz, ext_raw, final) if got is None else (got[0], got[0].raw, got[1])
 
 
 def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> Callable[[], dict | None]:
@@ -402,12 +423,12 @@ def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: l
             named[-1].raw = kind.apply(raw, c.sleeper, got.values)
 
 
-def _final(named: list[_Named], ref: Evaluated) -> Comparison:
-    """The comparison of the extended model: the last refit (step 5b), else the last named cause's, else the reference's."""
+def _final(named: list[_Named]) -> Comparison:
+    """The comparison of the model with the named causes: the last refit (step 5b), else the last named cause's."""
     for n in reversed(named):
         if n.refit is not None:
             return n.refit.cmp
-    return named[-1].e.cmp if named else ref.cmp
+    return named[-1].e.cmp
 
 
 def _second_round(target: Target, first: Round, named: list[_Named]) -> list[Candidate]:
@@ -591,19 +612,21 @@ def _write_outputs(result: Diagnosis, inp: _Inputs, before: Comparison, after: C
 
 
 def _result(inp: _Inputs, base: Evaluated, ref: Evaluated, ref_raw: dict, named: list, rounds: list,
-            evidence: dict, step_err: dict | None = None) -> tuple[Answer, list[CauseFit], CauseFit, Comparison]:
-    """Steps 4-6 as typed results: the answer, every candidate's entry, ``named_cause``, the final comparison."""
+            evidence: dict, final: Comparison, step_err: dict | None = None) -> tuple[Answer, list[CauseFit], CauseFit]:
+    """Steps 4-6 as typed results: the answer, every candidate's entry, ``named_cause``.
+
+    ``final``: the comparison of the extended model (with the nuisance values of step 5c).
+    """
     local = [c.sleeper for c in inp.cands if c.sleeper is not None]
     reach = (min(local), max(local)) if local else (-1, -1)
     named_entries = [_named_entry(n, i + 1, reach) for i, n in enumerate(named)]
-    final = _final(named, ref)
     first = rounds[0]
     best_ev = evidence.get((1, first.real[0].candidate)) if first.real else None
     answer = _answer(inp, ref, ref_raw, named_entries, final, best_ev, step_err)
     causes = [_entry(e, rd, i + 1, evidence.get((i + 1, e.candidate))) for i, rd in enumerate(rounds)
               for e in rd.ranked]
     legacy = _legacy_named(answer, base, best_ev, first.real[0].candidate.label if first.real else None)
-    return answer, causes, legacy, final
+    return answer, causes, legacy
 
 
 def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | None = None, scheduler: str | None = None,
@@ -648,12 +671,15 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
         ref_raw, ref, nuisance = _nuisance(pool, inp, base)
         step_err = _step_error(pool, inp, ref_raw, ref)   # waited for in _result
         named, rounds, evidence = _rounds(pool, inp, ref_raw, ref)
-        ext_raw = named[-1].raw if named else ref_raw
+        ext_raw, final = (named[-1].raw, _final(named)) if named else (ref_raw, ref.cmp)
+        if named:
+            nuisance, ext_raw, final = _nuisance_again(pool, inp, nuisance, ext_raw, final)
         ext_path = _extend(inp, ext_raw)
         validation = _validate(pool, inp, ext_raw)
         # inside the pool's lifetime: a named cause's intervals may need Jacobian runs not yet done
-        answer, causes, legacy, final = _result(inp, base, ref, ref_raw, named, rounds, evidence, step_err())
-        result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance, causes, legacy,
+        answer, causes, legacy = _result(inp, base, ref, ref_raw, named, rounds, evidence, final, step_err())
+        result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance.to_json(), causes,
+                           legacy,
                            ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
                            time.perf_counter() - t_start, _settings(inp.cands),
                            {"runs": pool.ahead_runs, "used": pool.ahead_used})
@@ -670,7 +696,8 @@ def hypothesis_gains(scenario_path, measured_path, hypotheses, out_dir, workers:
 
     Steps 1-2 of the diagnosis (the nominal run, the nuisance fit: the same reference, the same
     numbers), then one run per hypothesis: its causes applied to the reference at the given
-    values, no fitting. A hypothesis's gain is ``1 - J / J_nominal``, the definition of
+    values, no fitting of theirs, and step 5c (the nuisance values fitted again on that
+    model, kept when both chi-square and J fall). A hypothesis's gain is ``1 - J / J_nominal``, the definition of
     ``diagnosis.json``'s ``gain.total``. For a cause a user knows of (an inspection found a
     void) — and for the benchmark of issue 14, which asks what the *true* effects would gain on
     a record (``benchmarks/bench_diagnose_field.py --truth-gain``): a named cause's gain is
@@ -703,7 +730,7 @@ def hypothesis_gains(scenario_path, measured_path, hypotheses, out_dir, workers:
     try:
         pool = Pool(executor, str(scenario_path))
         base, _ = _baseline(pool, inp)
-        ref_raw, ref, _ = _nuisance(pool, inp, base)
+        ref_raw, ref, nz = _nuisance(pool, inp, base)
         raws = []
         for causes in hypotheses:
             raw = ref_raw
@@ -711,6 +738,9 @@ def hypothesis_gains(scenario_path, measured_path, hypotheses, out_dir, workers:
                 raw = Effect(c["cause"], c.get("sleeper"), c["parameters"]).apply(raw)
             raws.append(raw)
         got = pool.map(raws, then=lambda run: checked_comparison(inp.target, run, ref.cmp))
+        # step 5c as for named causes: the nuisance values fitted again with the hypothesis's causes
+        got = [(_nuisance_again(pool, inp, nz, raw, cmp)[2], None) if cmp is not None and hyp else (cmp, why)
+               for raw, hyp, (cmp, why) in zip(raws, hypotheses, got)]
     finally:
         executor.shutdown(wait=True, cancel_futures=True)
     j0 = base.cmp.objective
