@@ -64,9 +64,10 @@ module that applies it):
    ``evidence.refit``. Its naming evidence and per-cause gain stay those of its round.
 5c. **Nuisance again** (:func:`_nuisance_again`,
    :func:`orchestrator.inverse.nuisance.refit_with_causes`): with a cause named, the
-   vehicle, damping, speed and shift values are fitted once more, as in step 2, on the
-   model with the named causes (from step 2's values; the causes' parameters stay), and
-   kept when both chi-square and J fall: step 2 runs before any cause, so a value that
+   vehicle and damping values and the time shift are fitted once more (a Jacobian and three
+   Gauss-Newton steps, ~10 runs; the speed stays step 2's) on the model with the named
+   causes (from step 2's values, in its box, with its acceptance rule; the causes'
+   parameters stay), and kept when both chi-square and J fall: step 2 runs before any cause, so a value that
    can imitate part of a track effect took it up, or was refused, pressed against its box
    by it. The reported nuisance estimates and the extended model are then the refit's.
 6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,

@@ -92,8 +92,10 @@ catalogue's causes are screened:
    up a void's misfit and raised J by 0.7 %).
 
 4. **Again, with the named causes** (:func:`refit_with_causes`, called by the diagnosis once
-   causes are named): stage 3 once more on the extended model, from stage 3's values, kept
-   when both chi-square and J fall; its values, intervals and acceptance are then reported.
+   causes are named): stage 3's vehicle and damping values and the shift (not the speed) fitted
+   once more on the extended model, from stage 3's values, in its box and by its acceptance rule
+   (a Jacobian there, three Broyden-updated Gauss-Newton steps), kept when both chi-square and J
+   fall; its values, intervals and acceptance are then reported.
 
 :class:`NuisanceFit` is the result; :func:`fit_nuisance` leaves the target with the
 accepted gains (:attr:`~orchestrator.inverse.objective.Target.gains`) and the time shift
@@ -721,7 +723,7 @@ def refit_with_causes(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
       :data:`REFIT_STEPS` Gauss-Newton steps, one run each, the Jacobian updated by Broyden's
       rule after each; a step that does not lower the residual ends them. Measured on issue 14's
       51 field-like passages (RESULTS 2026-11-26, session 18): a full stage-3 fit here (~30 runs)
-      raised the gains as much but put the default diagnosis at 100 s against 86 s; steps on stage
+      raised the gains as much but put the default diagnosis at 100 s against 86-89 s without it; steps on stage
       3's own Jacobian (taken where refused values sat at their box's edge; 4 runs) were kept in
       21 diagnoses against 40 and left two of the gains that the full fit raised past their target;
     - the acceptance rule and the intervals of stage 3, on that Jacobian and the last residual;
