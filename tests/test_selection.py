@@ -147,3 +147,51 @@ def test_fits_side_by_side_overlap_and_keep_their_order():
     got = side_by_side(SimpleNamespace(spare=0),
                        {"b": lambda: order.append("b") or 2, "a": lambda: order.append("a") or 1})
     assert got == {"b": 2, "a": 1} and order == ["b", "a"]
+
+
+def test_pool_gives_a_freed_worker_to_the_shortest_queue_and_close_cancels_the_waiting():
+    """screening.Pool with ``slots``: runs wait in the pool; a freed slot goes to the thread with the fewest
+    runs waiting (a Gauss-Newton chain's single run before the rest of a Jacobian batch beside it), the
+    oldest first among equals; a run's result reaches its caller; close() cancels what still waits and
+    starts nothing more. A stand-in executor that finishes a run only when told (no simulation)."""
+    import threading
+    from concurrent.futures import CancelledError, Future
+
+    from orchestrator.inverse.screening import Pool
+
+    class Executor:
+        def __init__(self):
+            self.started = []    # (job, future) in the order the pool handed them over
+
+        def submit(self, fn, job):
+            f = Future()
+            self.started.append((job, f))
+            return f
+
+    ex = Executor()
+    pool = Pool(ex, slots=2)
+    batch = pool._enqueue(["J1", "J2", "J3", "J4"])            # a Jacobian batch, from this thread
+    assert [j for j, _ in ex.started] == ["J1", "J2"]          # two slots
+    chain = []
+    t = threading.Thread(target=lambda: chain.append(pool._enqueue(["G1"])))
+    t.start()
+    t.join()
+    assert [j for j, _ in ex.started] == ["J1", "J2"]          # no free slot yet
+    ex.started[0][1].set_result("r1")                          # J1 ends: G1's queue (1) is shorter than J's (2)
+    assert [j for j, _ in ex.started] == ["J1", "J2", "G1"] and batch[0].result(timeout=1) == "r1"
+    ex.started[1][1].set_result("r2")                          # J2 ends: only J's queue waits
+    assert [j for j, _ in ex.started][-1] == "J3"
+    pool.close()
+    assert batch[3].cancelled() and not batch[2].done()
+    ex.started[2][1].set_exception(RuntimeError("worker lost"))   # a run's error reaches its caller
+    try:
+        chain[0][0].result(timeout=1)
+        raise AssertionError("the run's error was not passed on")
+    except RuntimeError as exc:
+        assert "worker lost" in str(exc)
+    assert len(ex.started) == 4                                # nothing started after close()
+    try:
+        batch[3].result(timeout=1)
+        raise AssertionError("a cancelled run gave a result")
+    except CancelledError:
+        pass

@@ -105,7 +105,7 @@ comparison uses them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -505,6 +505,7 @@ class _Runs:
         self.s0 = float(target.shift)
         self.sims: dict[bytes, object] = {}
         self.cmps: dict[bytes, Comparison] = {}
+        self.runs = 0   # runs made (the pool's count also has those of fits beside this one)
 
     def shift(self, u) -> float:
         return self.s0 + (2.0 * float(u[-1]) - 1.0) * SHIFT_BOX
@@ -515,6 +516,7 @@ class _Runs:
         if todo:
             for p, run in zip(todo, self.pool.map([self.box.apply(self.raw, self.box.values(p)) for p in todo])):
                 self.sims[p.tobytes()] = run
+            self.runs += len(todo)
         for u in us:
             if u.tobytes() not in self.cmps:
                 self.target.shift = self.shift(u)
@@ -736,33 +738,33 @@ def refit_with_causes(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     why), else the updated :class:`NuisanceFit` (``values``, ``intervals``, ``identifiable``,
     ``shift`` and ``raw`` — the extended scenario with the refit's values — are the refit's;
     ``refit`` says what changed; ``cmp`` stays the reference's) and the extended model's new
-    comparison. ``target.shift`` is left as it was (the named causes' comparisons and their
-    intervals' runs are on it); the new comparison carries the refit's shift.
+    comparison. The refit moves the time shift on a copy of ``target``: ``target`` itself is not
+    changed, so the named causes' interval runs can use it meanwhile from another thread
+    (:func:`orchestrator.inverse.diagnose._named_and_nuisance_again`); the new comparison carries
+    the refit's shift.
     """
     veh = nz.stage3
     if veh is None or veh.box is None or not veh.box.names:
         return None
-    box, runs0, shift0 = veh.box, pool.runs, float(target.shift)
+    box = veh.box
     free = np.array([n != "speed" for n in box.names] + [True])
-    rn = _Runs(pool, target, box.apply(raw_ext, box.nominal), box)
-    u, r, cmp = veh.u.copy(), target.weighted_residuals(start), start
+    own = replace(target)   # its shift moves with the refit's
+    rn = _Runs(pool, own, box.apply(raw_ext, box.nominal), box)
+    u, r, cmp = veh.u.copy(), own.weighted_residuals(start), start
     pool.expect(int(free.sum()) + REFIT_STEPS)
-    try:
-        J, u, r, cmp = _broyden_steps(rn, _jacobian_at(rn, u, r, free), u, r, cmp, free)
-        notes: list[str] = []
-        lo, hi = _intervals(J, r, u, cmp)
-        keep = _accepted(box, u, lo, hi, notes) & free[:-1]
-        notes = [t for t in notes if not t.startswith("speed:")]     # not refitted: stage 3's judgement stands
-        lo, hi = _reported(J, r, u, lo, hi, target, cmp)
-        u_final = np.append(np.where(keep | ~free[:-1], u[:-1], np.clip(box.unit(box.nominal), 0.0, 1.0)), u[-1])
-        if not np.array_equal(u_final, u):
-            cmp = rn.comparisons([u_final])[0]
-    finally:
-        target.shift = shift0
+    J, u, r, cmp = _broyden_steps(rn, _jacobian_at(rn, u, r, free), u, r, cmp, free)
+    notes: list[str] = []
+    lo, hi = _intervals(J, r, u, cmp)
+    keep = _accepted(box, u, lo, hi, notes) & free[:-1]
+    notes = [t for t in notes if not t.startswith("speed:")]     # not refitted: stage 3's judgement stands
+    lo, hi = _reported(J, r, u, lo, hi, own, cmp)
+    u_final = np.append(np.where(keep | ~free[:-1], u[:-1], np.clip(box.unit(box.nominal), 0.0, 1.0)), u[-1])
+    if not np.array_equal(u_final, u):
+        cmp = rn.comparisons([u_final])[0]
+    nz.runs += rn.runs
     if not (cmp.chi2 < start.chi2 and cmp.objective < start.objective):
         nz.notes.append(f"refit with the named causes: J {start.objective:.4g} -> {cmp.objective:.4g}, chi-square "
                         f"{start.chi2:.4g} -> {cmp.chi2:.4g}; not both lower: stage 3's values stand")
-        nz.runs += pool.runs - runs0
         return None
     names = [n for n, f in zip(box.names, free) if f]
     refit = {"values_before": {n: float(nz.values[n]) for n in names},
@@ -770,8 +772,7 @@ def refit_with_causes(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
              "identifiable_before": {n: bool(nz.identifiable[n]) for n in names},
              "shift_before": float(nz.shift), "objective_before": float(start.objective),
              "objective_after": float(cmp.objective), "chi2_before": float(start.chi2), "chi2_after": float(cmp.chi2),
-             "runs": int(pool.runs - runs0), "notes": notes, "reason": "fitted again on the model with the named causes"}
-    nz.runs += pool.runs - runs0
+             "runs": int(rn.runs), "notes": notes, "reason": "fitted again on the model with the named causes"}
     return _refitted(nz, rn, keep, free, u_final, lo, hi, refit), cmp
 
 

@@ -100,6 +100,14 @@ class Pool:
     lock : threading.Lock
         Guards the counters and the progress bar: fits of different candidates may use the pool
         side by side, each from its own thread (:func:`orchestrator.inverse.selection.side_by_side`).
+    slots : int
+        Runs on the executor at once at most (its workers: :func:`orchestrator.sweeps.executors.executor_slots`);
+        0: no limit, every run goes to the executor when asked for. With a limit, the runs wait
+        here and a freed worker takes the next run of the thread with the fewest runs waiting
+        (:meth:`_next`): the executor's own queue is first come, first served, so the single
+        run of a Gauss-Newton step (a chain: the next step needs its answer) waited behind a
+        Jacobian batch of the fit beside it. Only when a run starts changes, not which runs
+        are made: the results are the same. :meth:`close` cancels the runs still waiting.
     """
 
     executor: object
@@ -112,6 +120,12 @@ class Pool:
     ahead_runs: int = 0
     ahead_used: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
+    slots: int = 0
+    _waiting: dict = field(default_factory=dict, repr=False, compare=False)   # thread -> deque of (seq, job, Future)
+    _running: int = field(default=0, repr=False, compare=False)
+    _seq: int = field(default=0, repr=False, compare=False)
+    _closed: bool = field(default=False, repr=False, compare=False)
+    _sched: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
     def count(self, **increments: float) -> None:
         """Add to the counters (``runs``, ``wall``, ``ahead_runs``, ``ahead_used``) under :attr:`lock`."""
@@ -143,9 +157,8 @@ class Pool:
         before the function is called: a run whose answer is needed only later (the step error's)
         no longer leaves the other workers idle while it runs alone."""
         from orchestrator.cosim.portable import PortableScenario
-        from orchestrator.cosim.sensing import sensors_job
 
-        futures = [self.executor.submit(sensors_job, PortableScenario.of(raw, self.source)) for raw in raws]
+        futures = self._enqueue([PortableScenario.of(raw, self.source) for raw in raws])
 
         def collect() -> list:
             t0 = time.perf_counter()
@@ -160,6 +173,70 @@ class Pool:
             return out
 
         return collect
+
+    def _enqueue(self, jobs: list) -> list:
+        """Futures of the runs of ``jobs`` (portable scenarios), started as :attr:`slots` allow."""
+        from collections import deque
+        from concurrent.futures import Future
+
+        futures = [Future() for _ in jobs]
+        with self._sched:
+            queue = self._waiting.setdefault(threading.get_ident(), deque())
+            for job, fut in zip(jobs, futures):
+                queue.append((self._seq, job, fut))
+                self._seq += 1
+        self._start_waiting()
+        return futures
+
+    def _next(self):
+        """The next waiting run (under :attr:`_sched`): the head of the shortest queue, the oldest head
+        among equals; None when none waits or every slot is taken."""
+        if self._closed or (0 < self.slots <= self._running):
+            return None
+        queues = [q for q in self._waiting.values() if q]
+        if not queues:
+            return None
+        self._running += 1
+        return min(queues, key=lambda q: (len(q), q[0][0])).popleft()
+
+    def _start_waiting(self) -> None:
+        """Hand waiting runs to the executor while slots are free (outside the lock: a finished
+        future runs its callback at once, in this thread)."""
+        from orchestrator.cosim.sensing import sensors_job
+
+        while True:
+            with self._sched:
+                nxt = self._next()
+            if nxt is None:
+                return
+            _, job, fut = nxt
+            try:
+                inner = self.executor.submit(sensors_job, job)
+            except BaseException as exc:   # the executor is shut down: this run's caller gets the error
+                self._finished(fut, None, exc)
+                continue
+            inner.add_done_callback(lambda f, fut=fut: self._finished(fut, f))
+
+    def _finished(self, fut, inner, exc: BaseException | None = None) -> None:
+        """A run ended (or could not start): its result or error to ``fut``, its slot to the next run."""
+        with self._sched:
+            self._running -= 1
+        if inner is not None and inner.cancelled():
+            fut.cancel()
+        elif inner is not None and inner.exception() is None:
+            fut.set_result(inner.result())
+        else:
+            fut.set_exception(exc if inner is None else inner.exception())
+        self._start_waiting()
+
+    def close(self) -> None:
+        """Cancel the runs still waiting for a slot (their callers get ``CancelledError``); no run starts after."""
+        with self._sched:
+            self._closed = True
+            waiting = [fut for q in self._waiting.values() for _, _, fut in q]
+            self._waiting.clear()
+        for fut in waiting:
+            fut.cancel()
 
 
 def scalar_axis(kind, raw: dict, sleeper, grid: tuple | None = None) -> tuple[np.ndarray, float]:
