@@ -1108,8 +1108,9 @@ class CompiledContacts:
         return args
 
     # ------------------------------------------------------------------ wheels
-    def influence_rows(self, body, e: int) -> np.ndarray:
-        """``A^{-1} r`` of the load rows of element ``e`` of ``body``, shape (k, n).
+    def influence_rows(self, body, e: int, out: np.ndarray | None = None) -> np.ndarray:
+        """``A^{-1} r`` of the load rows of element ``e`` of ``body``, shape (k, n) (written into ``out[:k]``
+        and ``out`` returned when given).
 
         Cached per load row, not per element: neighbouring elements share a node (a beam
         element's rows are those of its two nodes' dofs, the solid's of its two path nodes),
@@ -1137,7 +1138,11 @@ class CompiledContacts:
             for r, z in zip(want, self.f.solve(E).T):
                 cache[(body.name, r)] = np.ascontiguousarray(z)
             self.integ.counters.solves += len(want)
-        return np.stack([cache[(body.name, r)] for r in ids])
+        if out is None:
+            return np.stack([cache[(body.name, r)] for r in ids])
+        for j, r in enumerate(ids):
+            out[j] = cache[(body.name, r)]
+        return out
 
     def _load(self, i: int, k: int) -> None:
         """The data of table entry ``k`` (a body's element) for wheel i."""
@@ -1149,8 +1154,8 @@ class CompiledContacts:
         self.gd[i, :nr] = body.gdofs
         self.nr[i] = nr
         self.R[i] = body.residual_block(e)
-        self.Ze[i] = 0.0
-        self.Ze[i, :kr] = self.influence_rows(body, e)
+        self.Ze[i, kr:] = 0.0
+        self.influence_rows(body, e, self.Ze[i])
         self.fresh[i] = 1
         self.ent[0, i] = k
 

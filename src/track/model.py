@@ -66,7 +66,6 @@ class Body:
     fom: BeamBody
     rom: ReducedBody
     gdofs: np.ndarray
-    residual_blocks: dict = field(default_factory=dict, repr=False)  # element -> 4x4 [m/N]
 
     @property
     def solid(self) -> bool:
@@ -113,9 +112,10 @@ class Body:
         zeros for the solid (no residual flexibility on its retained path nodes)."""
         if self.solid:
             return np.zeros((4, 4))
-        R = self.residual_blocks.get(element)
+        blocks = self.rom.residual_blocks
+        R = blocks.get(element)
         if R is None:
-            R = self.residual_blocks[element] = element_residual(self.rom, np.arange(2 * element, 2 * element + 4))
+            R = blocks[element] = element_residual(self.rom, np.arange(2 * element, 2 * element + 4))
         return R
 
     def load_rows(self, element: int) -> np.ndarray:

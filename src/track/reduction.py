@@ -27,7 +27,7 @@ tests/test_reduction.py, which also shows the convergence as modes are added).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg as la
@@ -58,6 +58,10 @@ class ReducedBody:
     interior: np.ndarray = None
     modes_I: np.ndarray = None
     K_II_factor: tuple = None
+    # element -> its 4x4 block of the residual flexibility [m/N] (track.model.Body.residual_block): kept
+    # with the reduced body, which a process reuses across builds (the variants of a diagnosis), not with
+    # the Body of one build (2376 blocks of 4200 were computed again in six void variants' runs, 8 ms a run)
+    residual_blocks: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def nb(self) -> int:
