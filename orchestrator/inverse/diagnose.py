@@ -112,7 +112,7 @@ from orchestrator.inputs.causes import CATALOGUE, Candidate, candidates, kind_of
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inverse.diagnosis import Answer, Baseline, CauseFit, Diagnosis, Gain, Passage
 from orchestrator.inverse.jsonable import numpy_default
-from orchestrator.inverse.nuisance import NuisanceFit
+from orchestrator.inverse.nuisance import NuisanceFit, widen_speed_for_step
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
 from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFitter, Round, cause_stages, select,
@@ -321,7 +321,9 @@ def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> Call
     One run: the reference at half its time step (same output step), started now and waited for
     when the answer needs it (the function returned), so that it runs beside the screening.
     Output of that function: the step error's JSON (``step`` [s], ``objective``, ``groups``,
-    ``channels``) or None when that run cannot be compared (dropped with its reason).
+    ``channels``; ``speed_ratio`` and ``speed_bias``: what the step does to the fitted speed,
+    :func:`orchestrator.inverse.nuisance.speed_step_bias`) or None when that run cannot be
+    compared (dropped with its reason).
     """
     fine_raw = copy.deepcopy(ref_raw)
     fine_raw["simulation"]["step"] = 0.5 * float(ref_raw["simulation"]["step"])
@@ -329,11 +331,15 @@ def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> Call
     pending = pool.submit([fine_raw])
 
     def result() -> dict | None:
+        from orchestrator.inverse.nuisance import speed_step_bias
+
         cmp, why = checked_comparison(inp.target, pending()[0], ref.cmp)
         if cmp is None:
             pool.drop("the reference at half its time step", "step error", why)
             return None
-        return {"step": float(ref_raw["simulation"]["step"]), **step_error(ref.cmp, cmp, inp.target)}
+        a, bias = speed_step_bias(inp.target, ref.cmp, cmp)
+        return {"step": float(ref_raw["simulation"]["step"]), **step_error(ref.cmp, cmp, inp.target),
+                "speed_ratio": a, "speed_bias": bias}
 
     return result
 
@@ -698,7 +704,10 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
         entries, nuisance, ext_raw, final = _named_and_nuisance_again(pool, inp, named, nuisance, ext_raw, final)
         ext_path = _extend(inp, ext_raw)
         validation = _validate(pool, inp, ext_raw)
-        answer, causes, legacy = _result(inp, base, ref, ref_raw, entries, rounds, evidence, final, step_err())
+        step_json = step_err()
+        if step_json is not None:   # the speed's interval gets the model's own time-step error
+            widen_speed_for_step(nuisance, step_json["speed_ratio"], step_json["speed_bias"], step_json["step"])
+        answer, causes, legacy = _result(inp, base, ref, ref_raw, entries, rounds, evidence, final, step_json)
         result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance.to_json(), causes,
                            legacy,
                            ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
