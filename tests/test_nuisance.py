@@ -354,3 +354,37 @@ def test_speed_step_bias_extrapolates_to_a_finer_model(sc, pool, tmp_path):
     up = replace(nz, intervals={"speed": [lo * v, hi * v]}, notes=[])
     widen_speed_for_step(up, a_half, -bias, h)   # a bias the other way widens the other side
     assert up.intervals["speed"][1] == hi * v and up.intervals["speed"][0] < lo * v
+
+
+def test_speed_found_again_with_the_named_cause(sc, pool, tmp_path):
+    """Stage 5 (nuisance.speed_again), on the pattern of the case that motivated it (RESULTS 2026-11-26,
+    session 19: worn_nose+mismatch 7000, a worn nose beside a vehicle mismatch, left the speed 3.9 % low).
+    Truth, a different model from the one fitted: 3.7 % faster, the nose worn (impact angle 0.0169 rad),
+    the wheelset 16 % heavier and k1 18 % softer. Stages 1-3 run on the nominal scenario; the worn nose,
+    as a diagnosis would name it, is then put in at its true value, and the speed is found again.
+
+    Asserted: stage 5 is kept (both chi-square and J fall, its own rule) and its speed is at least twice as
+    close to the truth as stages 1-3 left it. Measured: stage 1 found "the data agree with the scenario"
+    (33.333 m/s, warp 0.9991) for a true 34.566; stage 5, 34.052 m/s in three runs (J 0.260 -> 0.133), the
+    error 1.233 -> 0.514 m/s against the 0.617 asserted; with plain steps (no secant) 33.883, which fails.
+    Its interval [33.54, 34.22] still misses the truth: the warp asks for +0.3 % more at the end (not asserted)."""
+    from orchestrator.inverse.nuisance import fit_nuisance, speed_again
+
+    nose = Effect("impact_angle", None, {"impact_angle": 0.0169})
+    path, truth = _truth(sc, tmp_path, "worn_fast", speed=1.037, start_values={"wheelset_mass": 1745.0, "k1": 0.99e6},
+                         effect=nose)
+    target, base = _target(sc, path, pool)
+    nz = fit_nuisance(pool, target, sc.raw, base)
+    v_true, v_before = truth["vehicle"]["speed"], nz.values["speed"]
+    ext = nose.apply(nz.raw)
+    start = comparison(target, pool.map([ext])[0])
+    got = speed_again(pool, target, nz, ext, start)
+    print(f"\nstages 1-3: speed {v_before:.4f} (truth {v_true:.4f}) {nz.notes}")
+    assert got is not None, nz.notes[-1]
+    fit, raw, cmp = got
+    v = fit.values["speed"]
+    print(f"stage 5: {v:.4f} {fit.intervals['speed']}; J {start.objective:.4f} -> {cmp.objective:.4f}; "
+          f"{fit.speed_again['runs']} runs")
+    assert cmp.objective < start.objective and cmp.chi2 < start.chi2
+    assert abs(v - v_true) < 0.5 * abs(v_before - v_true)
+    assert raw["vehicle"]["speed"] == v and raw["track"]["crossing"]["impact_angle"] == 0.0169
