@@ -342,7 +342,8 @@ def test_speed_step_bias_extrapolates_to_a_finer_model(sc, pool, tmp_path):
     coarse, fine = comparison(target, coarse_run), comparison(target, fine_run)
     a_meas, lo, hi = speed_from_data(target, coarse)
     a_half, bias = speed_step_bias(target, coarse, fine)
-    print(f"\nwarp on the quarter-step passage {a_meas:.5f} [{lo:.4f}, {hi:.4f}]; half step {a_half:.5f}, bias {bias:+.5f}")
+    print(f"\nwarp on the quarter-step passage {a_meas:.5f} [{lo:.4f}, {hi:.4f}]; half step {a_half:.5f}, "
+          f"bias {bias:+.5f}")
     assert bias < 0
     assert abs(a_half - 1.0) < abs(a_meas - 1.0) < abs(bias)
     v = float(sc.raw["vehicle"]["speed"])

@@ -707,7 +707,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
     try:
         base, baseline = _baseline(pool, inp)
         ref_raw, ref, nuisance = _nuisance(pool, inp, base)
-        step_err = _step_error(pool, inp, ref_raw, ref)   # waited for in _result
+        step_err = _step_error(pool, inp, ref_raw, ref)   # waited for after step 5c
         named, rounds, evidence = _rounds(pool, inp, ref_raw, ref)
         ext_raw, final = (named[-1].raw, _final(named)) if named else (ref_raw, ref.cmp)
         entries, nuisance, ext_raw, final = _named_and_nuisance_again(pool, inp, named, nuisance, ext_raw, final)

@@ -376,7 +376,8 @@ def widen_speed_for_step(nz: NuisanceFit, a: float, bias: float, step: float) ->
     nz.speed_step = {"step": float(step), "ratio_half_step": float(a), "bias": float(bias), "order": STEP_ORDER,
                      "interval_before": [float(lo), float(hi)]}
     nz.notes.append(f"speed: the model's time step ({step:g} s) biases the fitted speed by {100 * bias:+.3f} % "
-                    f"(half-step run: warp ratio {a:.5f}, order {STEP_ORDER} extrapolated): interval widened on that side")
+                    f"(half-step run: warp ratio {a:.5f}, order {STEP_ORDER} extrapolated): interval widened on "
+                    "that side")
 
 
 # ------------------------------------------------------------------------------------ stage 2: sensor gains
@@ -938,6 +939,5 @@ def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
 
 
 __all__ = ["NuisanceFit", "fit_nuisance", "speed_from_data", "speed_corrected", "sensor_gains", "neighbourhoods",
-           "channel_log_gains", "fit_vehicle_and_damping", "refit_accepted", "refit_with_causes", "speed_again", "speed_step_bias", "widen_speed_for_step",
-           "effective_samples",
-           "resolved_sensors", "PRIORS"]
+           "channel_log_gains", "fit_vehicle_and_damping", "refit_accepted", "refit_with_causes", "speed_again",
+           "speed_step_bias", "widen_speed_for_step", "effective_samples", "resolved_sensors", "PRIORS"]
