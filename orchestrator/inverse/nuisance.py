@@ -304,7 +304,8 @@ def speed_corrected(pool, target: Target, raw: dict, base_cmp: Comparison,
     pad_global+mismatch 7101 of issue 14's matrix: the warp asked for 32.91 -> 32.68 m/s, the secant
     then overshot to 33.10, where J rose above the start). Output: the raw scenario
     at the fitted speed, the speed [m/s], its comparison (``base_cmp`` when no run was
-    needed) and the speed's 90 % interval [m/s] (:func:`speed_from_data` on the last run).
+    needed) and the speed's 90 % interval [m/s] (:func:`speed_from_data` on the run returned);
+    the target is left aligned on that run.
     """
     v0 = float(raw["vehicle"]["speed"])
     dur0 = float(raw["simulation"]["duration"])
@@ -332,11 +333,9 @@ def speed_corrected(pool, target: Target, raw: dict, base_cmp: Comparison,
         tried.append((cmp.objective, out, v, cmp, [v * lo, v * hi], a))
         if abs(a - 1.0) <= SPEED_RTOL:
             break
-    if secant:   # the run of least J: a secant step can overshoot where the warp's ratio is not smooth in v
-        _, out, v, cmp, interval, a = min(tried, key=lambda t: t[0])
-        target.shift = cmp.shift
-    else:
-        interval = [v * lo, v * hi]
+    # with secant the run of least J: a secant step can overshoot where the warp's ratio is not smooth in v
+    _, out, v, cmp, interval, a = min(tried, key=lambda t: t[0]) if secant else tried[-1]
+    target.shift = cmp.shift
     notes.append(f"speed: {v:.3f} m/s from the data (scenario {v0:.3f}; {'its' if secant else 'last'} warp ratio "
                  f"{a:.4f})")
     return out, v, cmp, interval
@@ -575,15 +574,30 @@ def _jacobian(runs, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.column_stack([(r - r0) / (q[i] - u[i]) for i, (r, q) in enumerate(zip(rs, pts))]), r0
 
 
+class _Counted:
+    """A pool seen through :meth:`map` that counts its own runs (the pool's count also has those of fits beside)."""
+
+    def __init__(self, pool):
+        self.pool, self.runs = pool, 0
+
+    def map(self, raws: list, then=None) -> list:
+        self.runs += len(raws)
+        return self.pool.map(raws, then)
+
+
 class _Runs:
     """Comparisons of unit-cube points ``[box..., shift]``: one run per box point, any shift without a run."""
 
     def __init__(self, pool, target: Target, raw: dict, box: _Box):
-        self.pool, self.target, self.raw, self.box = pool, target, raw, box
+        self.pool, self.target, self.raw, self.box = _Counted(pool), target, raw, box
         self.s0 = float(target.shift)
         self.sims: dict[bytes, object] = {}
         self.cmps: dict[bytes, Comparison] = {}
-        self.runs = 0   # runs made (the pool's count also has those of fits beside this one)
+
+    @property
+    def runs(self) -> int:
+        """Runs made (the pool's own count also has those of fits beside this one)."""
+        return self.pool.runs
 
     def shift(self, u) -> float:
         return self.s0 + (2.0 * float(u[-1]) - 1.0) * SHIFT_BOX
@@ -594,7 +608,6 @@ class _Runs:
         if todo:
             for p, run in zip(todo, self.pool.map([self.box.apply(self.raw, self.box.values(p)) for p in todo])):
                 self.sims[p.tobytes()] = run
-            self.runs += len(todo)
         for u in us:
             if u.tobytes() not in self.cmps:
                 self.target.shift = self.shift(u)
@@ -877,17 +890,6 @@ def _refitted(nz: NuisanceFit, rn: _Runs, keep: np.ndarray, free: np.ndarray, u_
     return out
 
 
-class _Counted:
-    """A pool seen through :meth:`map` that counts its own runs (the pool's count also has those of fits beside)."""
-
-    def __init__(self, pool):
-        self.pool, self.runs = pool, 0
-
-    def map(self, raws: list, then=None) -> list:
-        self.runs += len(raws)
-        return self.pool.map(raws, then)
-
-
 def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
                 start: Comparison) -> tuple[NuisanceFit, dict, Comparison] | None:
     """Stage 5, after the causes: stage 1's speed from the data again, on the extended model.
@@ -909,7 +911,7 @@ def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     Input: the pool, the target (not changed: a copy takes the new shift), the nuisance fit so
     far, the extended raw scenario and its comparison ``start``. Output: ``None`` (the speed
     stands; a note says why when runs were made), else the fit with ``values["speed"]``,
-    ``intervals["speed"]`` (stage 1's profile interval on the last run), ``shift`` and ``raw``
+    ``intervals["speed"]`` (stage 1's profile interval on the run kept), ``shift`` and ``raw``
     (the extended scenario at the new speed) updated and ``speed_again`` saying what changed,
     the extended raw scenario and its comparison.
     """

@@ -191,13 +191,15 @@ class Pool:
     def _next(self):
         """The next waiting run (under :attr:`_sched`): the head of the shortest queue, the oldest head
         among equals; None when none waits or every slot is taken."""
-        if self._closed or (0 < self.slots <= self._running):
-            return None
-        queues = [q for q in self._waiting.values() if q]
-        if not queues:
+        if self._closed or not self._waiting or 0 < self.slots <= self._running:
             return None
         self._running += 1
-        return min(queues, key=lambda q: (len(q), q[0][0])).popleft()
+        key = min(self._waiting, key=lambda k: (len(self._waiting[k]), self._waiting[k][0][0]))
+        queue = self._waiting[key]
+        out = queue.popleft()
+        if not queue:   # only non-empty queues are kept (a fit's thread ends; a new one gets a new queue)
+            del self._waiting[key]
+        return out
 
     def _start_waiting(self) -> None:
         """Hand waiting runs to the executor while slots are free (outside the lock: a finished
