@@ -313,8 +313,7 @@ def speed_corrected(pool, target: Target, raw: dict, base_cmp: Comparison,
     if abs(a - 1.0) <= SPEED_RTOL:
         notes.append(f"speed: the data agree with the scenario's {v0:.3f} m/s (warp ratio {a:.4f})")
         return raw, v0, base_cmp, [v0 * lo, v0 * hi]
-    v, cmp, out = v0, base_cmp, raw
-    v_prev = a_prev = None
+    v, v_prev, a_prev = v0, None, None
     tried = []
     for _ in range(SPEED_RUNS):
         v_next = v * a if not secant or v_prev is None else _secant_speed(v, a, v_prev, a_prev)
