@@ -19,6 +19,16 @@ module that applies it):
    :data:`SENSOR_REACH` beyond them, the global ones) screened at the magnitudes of its
    grid, a dense 1-D search between them, the best re-run and fitted, all ranked by
    their BIC on the effective sample size.
+3b. **Looking further** (:func:`_further`, :func:`orchestrator.inverse.selection.widen`): when
+   round 1 names nothing and the residual is above the noise, the local candidates up to
+   :data:`FAR_REACH` sleepers beyond the sensors are screened, confirmed and fitted too, and
+   ranked with round 1's as one round, then named by the same rule. The sensors see a void a
+   few sleepers beyond them through the rail's bending and the wheel's passage (measured:
+   void_off_sensor 7202, a void at 25, two beyond the last instrumented sleeper 23; the truth
+   removes 82 % of J; with reach 1 the answer was ``unexplained``, the best candidate a pad at
+   24 removing 20 % of the explainable misfit; named at 25 with reach 3, gain 79 %). Only
+   then, so a diagnosis that names a cause near the sensors pays no run for it (the default
+   diagnosis would screen 8 more candidates, ~50 runs).
 4. **Naming** (:func:`_pick`): the best-ranked candidate that passes the rule of
    :mod:`orchestrator.inverse.significance` — significant on the effective sample size,
    removes at least a quarter of the explainable misfit, never makes the fit worse, and
@@ -121,11 +131,12 @@ from orchestrator.inverse.nuisance import NuisanceFit, widen_speed_for_step
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
 from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFitter, Round, cause_stages, select,
-                                             side_by_side, superposed_ranking)
+                                             side_by_side, superposed_ranking, widen)
 from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, LOUD_FACTOR, MIN_SHARE, NONE_MARGIN, Evidence,
                                                assess, at_noise_level, locate, step_error)
 
 SENSOR_REACH = 1     # local causes on the sleepers carrying sensors +- this many (an effect just beyond them)
+FAR_REACH = 3        # ... and +- this many when round 1 names nothing above the noise (step 3b)
 MAX_CAUSES = 2       # causes named at most (forward selection)
 SECOND_ROUND = 4     # candidates of round 1 (next best) screened again on top of the first named cause, ...
 SECOND_CONFIRM = 2   # ... of which this many are re-run and fitted
@@ -414,6 +425,11 @@ def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> tuple[li
     while True:
         rd = rounds[-1]
         pick, ev, tried = _pick(rd, inp.target)
+        far = _further(inp, ref) if pick is None and len(rounds) == 1 else []
+        if far:   # step 3b: round 1 looks further
+            rounds[0] = widen(pool, inp.target, raw, rd, far)
+            inp.cands = inp.cands + far
+            continue
         evidence.update({(len(rounds), c): v for c, v in tried.items()})
         if pick is None:
             break
@@ -429,6 +445,16 @@ def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> tuple[li
     if len(named) == 2:
         _backfit(pool, inp.target, ref_raw, ref, named)
     return named, rounds, evidence
+
+
+def _further(inp: _Inputs, ref: Evaluated) -> list[Candidate]:
+    """Step 3b: the local candidates up to :data:`FAR_REACH` sleepers beyond the sensors not yet screened,
+    when the reference's residual is above the noise (else none: a residual at the noise level asks for
+    no cause, and a named cause for no further look)."""
+    if at_noise_level(ref.cmp, inp.target)[0]:
+        return []
+    have = set(inp.cands)
+    return [c for c in candidates(_sensor_sleepers(inp.sensors), len(inp.sleeper_x), FAR_REACH) if c not in have]
 
 
 def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: list[_Named]) -> None:
@@ -632,7 +658,7 @@ def _settings(cands: list[Candidate]) -> dict:
     """The thresholds of the diagnosis and the candidates' labels (``diagnosis.json`` ``settings``)."""
     return {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL, "none_margin": NONE_MARGIN,
             "loud_factor": LOUD_FACTOR, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH,
-            "max_causes": MAX_CAUSES, "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM,
+            "far_reach": FAR_REACH, "max_causes": MAX_CAUSES, "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM,
             "candidates": [c.label for c in cands]}
 
 
@@ -789,5 +815,5 @@ def hypothesis_gains(scenario_path, measured_path, hypotheses, out_dir, workers:
                            if cmp is not None else {"error": why} for cmp, why in got]}
 
 
-__all__ = ["diagnose", "hypothesis_gains", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "MAX_CAUSES",
-           "SECOND_ROUND", "SECOND_CONFIRM"]
+__all__ = ["diagnose", "hypothesis_gains", "DELTA_BIC", "Diagnosis", "CauseFit", "SENSOR_REACH", "FAR_REACH",
+           "MAX_CAUSES", "SECOND_ROUND", "SECOND_CONFIRM"]

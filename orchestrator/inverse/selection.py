@@ -11,7 +11,7 @@ next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of
    best-fitting proxy — done as soon as the candidate's last screening run is in, while the
    batch goes on;
 3. :func:`_confirm`: the :data:`CONFIRM` best re-run at their best magnitude;
-4. :func:`_coarse_fits`, :func:`_fine_fits`: bounded least squares (:class:`CauseFitter`;
+4. :func:`_fits`: bounded least squares (:class:`CauseFitter`;
    a void first as a wedge, :func:`cause_stages`, started from its screened profile (uniform gap or wedge)
    or a one-sided wedge, whichever fits better, and from the next of them when the fit cannot leave
    that start: a hanging sleeper has no gradient), all parameters of the best and of
@@ -221,6 +221,7 @@ class Round:
     twins: dict
     fitters: dict
     screened: dict = field(default_factory=dict)
+    found: tuple = ()   # (dense, confirmed, fitted) as :func:`select` found them: what :func:`widen` adds to
 
 
 def _axes(kind, raw: dict, sleeper) -> list[tuple[np.ndarray | None, np.ndarray, float]]:
@@ -354,14 +355,32 @@ def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, ca
     ``confirm``: how many of the screened candidates are re-run and fitted (the later
     rounds of forward selection confirm fewer: they screen only a few).
     """
+    dense, grids, confirmed, fitted, fitters = _explore(pool, target, raw, ref, cands, confirm)
+    rd = _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)
+    rd.screened, rd.found = grids, (dense, confirmed, fitted)
+    return rd
+
+
+def _explore(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, confirm: int) -> tuple:
+    """Steps 1-4 of a round for ``cands``: (dense, grids, confirmed, fitted, fitters) as the steps give them."""
     axes = {c: _axes(kind_of(c), raw, c.sleeper) for c in cands}
     pool.expect(sum(len(xs) - 1 for c in cands for _, xs, _ in axes[c]))
     dense, grids = _screen(pool, target, raw, ref, cands, axes)
     confirmed = _confirm(pool, target, raw, ref, dense, confirm)
     fitted, fitters = _fits(pool, target, raw, ref, confirmed)
-    rd = _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)
-    rd.screened = grids
-    return rd
+    return dense, grids, confirmed, fitted, fitters
+
+
+def widen(pool: Pool, target: Target, raw: dict, rd: Round, more: list, confirm: int = CONFIRM) -> Round:
+    """Round ``rd`` (of :func:`select`, on ``raw``) with the candidates ``more`` added: they are screened,
+    confirmed (their ``confirm`` best) and fitted as :func:`select` does, and ranked with ``rd``'s, on the
+    same reference, as one round (:func:`_rank`; ``rd``'s runs are not repeated)."""
+    dense, grids, confirmed, fitted, fitters = _explore(pool, target, raw, rd.reference, more, confirm)
+    d0, c0, f0 = rd.found
+    out = _rank(target, rd.reference, rd.k_ref, {**d0, **dense}, {**c0, **confirmed}, {**f0, **fitted},
+                {**rd.fitters, **fitters})
+    out.screened, out.found = {**rd.screened, **grids}, ({**d0, **dense}, {**c0, **confirmed}, {**f0, **fitted})
+    return out
 
 
 def superposed_ranking(target: Target, first: Round, extended: Evaluated, cands: list) -> list:
@@ -385,5 +404,5 @@ def superposed_ranking(target: Target, first: Round, extended: Evaluated, cands:
     return [c for _, c in sorted(out, key=lambda t: t[0])]
 
 
-__all__ = ["select", "superposed_ranking", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO",
+__all__ = ["select", "widen", "superposed_ranking", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO",
            "FIT_MAX_NFEV", "FINE_MAX_NFEV", "PENALTY"]
