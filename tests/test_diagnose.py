@@ -169,6 +169,7 @@ def test_void_through_another_model_is_named_with_its_sleeper(tmp_path):
     assert a["kind"] == "named" and _named_right(a["causes"][0], case["effects"][0]), a
     assert result["named_cause"] == a["causes"][0]
     assert result["gain"]["total"] >= 0.5, result["gain"]
+    assert not result["settings"]["looked_further"]   # named near the sensors: no run beyond them (step 3b)
     _check_uncertainty(a["causes"][0])
     # hypothesis_gains (what benchmarks/bench_diagnose_field.py --truth-gain uses): a consistency check, two code
     # paths of ours -- the named cause as a hypothesis on the same reference (the same nominal run and nuisance
@@ -206,7 +207,8 @@ def test_void_two_sleepers_beyond_the_sensors_is_named_there(tmp_path):
     assert result["gain"]["total"] >= truth["hypotheses"][0]["gain"] - 0.05, (result["gain"], truth)
     labels = result["settings"]["candidates"]   # round 1 widened: the far sleepers were screened, both sides
     assert {"ballast_void@25", "ballast_void@26", "ballast_void@16"} <= set(labels), labels
-    assert result["settings"]["far_reach"] == FAR_REACH > SENSOR_REACH
+    assert result["settings"]["far_reach"] == FAR_REACH > SENSOR_REACH and result["settings"]["looked_further"]
+    assert "it also looked up to" in (tmp_path / "out" / "report.md").read_text(encoding="utf-8")
 
 
 def test_void_and_soft_pad_next_to_it_are_both_named(tmp_path):

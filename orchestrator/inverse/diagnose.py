@@ -219,6 +219,7 @@ class _Inputs:
     cands: list
     sleeper_x: np.ndarray
     x_start: float
+    looked_further: bool = False   # step 3b ran: ``cands`` holds the far candidates too
 
     @property
     def raw0(self) -> dict:
@@ -428,7 +429,7 @@ def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> tuple[li
         far = _further(inp, ref) if pick is None and len(rounds) == 1 else []
         if far:   # step 3b: round 1 looks further
             rounds[0] = widen(pool, inp.target, raw, rd, far)
-            inp.cands = inp.cands + far
+            inp.cands, inp.looked_further = inp.cands + far, True
             continue
         evidence.update({(len(rounds), c): v for c, v in tried.items()})
         if pick is None:
@@ -654,11 +655,12 @@ def _total_gain(before: Comparison, after: Comparison) -> Gain:
                  for k, v in before.channels.items()})
 
 
-def _settings(cands: list[Candidate]) -> dict:
-    """The thresholds of the diagnosis and the candidates' labels (``diagnosis.json`` ``settings``)."""
+def _settings(cands: list[Candidate], looked_further: bool = False) -> dict:
+    """The thresholds of the diagnosis, whether round 1 looked further (step 3b) and the candidates' labels
+    (``diagnosis.json`` ``settings``)."""
     return {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL, "none_margin": NONE_MARGIN,
             "loud_factor": LOUD_FACTOR, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH,
-            "far_reach": FAR_REACH, "max_causes": MAX_CAUSES, "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM,
+            "far_reach": FAR_REACH, "looked_further": looked_further, "max_causes": MAX_CAUSES, "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM,
             "candidates": [c.label for c in cands]}
 
 
@@ -746,7 +748,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
         result = Diagnosis(str(scenario_path), str(measured_path), answer, baseline, nuisance.to_json(), causes,
                            legacy,
                            ext_path.name, _total_gain(base.cmp, final), validation, pool.dropped, pool.runs,
-                           time.perf_counter() - t_start, _settings(inp.cands),
+                           time.perf_counter() - t_start, _settings(inp.cands, inp.looked_further),
                            {"runs": pool.ahead_runs, "used": pool.ahead_used})
         _write_outputs(result, inp, base.cmp, final, executor)   # the workers draw the report's plots
     finally:

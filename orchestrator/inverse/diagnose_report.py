@@ -270,11 +270,22 @@ def _noise_j(result: Diagnosis) -> float:
     return float("nan")
 
 
+def _looked_further(settings: dict) -> str:
+    """The sentence saying round 1 looked beyond ``sensor_reach`` (diagnose step 3b), or "" when it did not."""
+    if not settings.get("looked_further"):
+        return ""
+    return (f"Round 1 named nothing near the sensors above the noise, so it also looked up to "
+            f"{settings.get('far_reach')} sleepers beyond them (step 3b).")
+
+
 def _cause_lines(result: Diagnosis) -> list[str]:
     """The table of candidates and the extended scenario's gain."""
     lines = ["", "## Candidates (per round, best first)", "",
              "| round | cause | sleeper | stage | parameters | J | gain | ΔBIC_eff vs best | rule |",
              "|---|---|---|---|---|---|---|---|---|"]
+    far = _looked_further(result.settings)
+    if far:
+        lines[1:1] = ["", far]
     for c in result.causes:
         e = c.evidence
         sig = e.get("significance")
