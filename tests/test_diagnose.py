@@ -513,23 +513,50 @@ def test_dense_search_skips_samples_outside_the_simulated_window():
 
 def _searchable_target(meas, sigma):
     """:func:`_fake_target` with what :func:`orchestrator.inverse.screening.dense_search` calls."""
-    from orchestrator.inverse.objective import chi2_rows
+    from orchestrator.inverse.objective import objective_rows
 
     target = _fake_target(meas, sigma)
     target.shift = 0.0
     target.score = lambda on: _cmp_of(target, {k: on[k] - meas[k] for k in on})
-    target.chi2_rows = lambda rows, ids, sizes: chi2_rows(target.measured, rows, ids, sizes, target.sigma,
-                                                          target.scale)
+    target.objective_rows = lambda rows, ids, sizes: objective_rows(target.measured, rows, ids, sizes,
+                                                                    target.layout.groups, target.layout.weights,
+                                                                    target.scale)
     return target
+
+
+def test_objective_of_many_rows_is_the_hand_computed_one():
+    """:func:`orchestrator.inverse.objective.objective_rows` (how the dense search ranks its points) against J
+    computed by hand: residuals constant per channel, so each channel's nRMSE is |c| / scale; J is the weighted
+    mean of the group means (group P weight 1, Q weight 3 here). A channel with one valid sample in a row
+    makes that row NaN. Tolerance 1e-12: sums of 50 equal squares, round-off only."""
+    from types import SimpleNamespace
+
+    from orchestrator.inverse.objective import objective_rows
+
+    n = 50
+    meas = {"P1": np.zeros(n), "P2": np.zeros(n), "Q1": np.zeros(n), "Q2": np.zeros(n)}
+    scale = {"P1": 2.0, "P2": 4.0, "Q1": 1.0, "Q2": 5.0}
+    groups = {"P1": "P", "P2": "P", "Q1": "Q", "Q2": "Q"}
+    c = np.array([[1.0, -2.0, 0.5, 3.0], [0.2, 0.0, -1.0, 1.0], [1.0, 1.0, 1.0, 1.0]])
+    ids = list(meas)
+    rows = np.repeat(c, n, axis=1)
+    rows[2, 2 * n + 1:3 * n] = np.nan            # row 3: channel Q1 has a single valid sample
+    sizes = np.arange(5) * n
+    got = objective_rows(SimpleNamespace(channels=meas), rows, ids, sizes, groups, {"P": 1.0, "Q": 3.0}, scale)
+    for r in range(2):
+        nr = [abs(c[r, i]) / scale[k] for i, k in enumerate(ids)]
+        hand = (1.0 * (nr[0] + nr[1]) / 2 + 3.0 * (nr[2] + nr[3]) / 2) / 4.0
+        assert got[r] == pytest.approx(hand, rel=1e-12, abs=1e-15), (r, got[r], hand)
+    assert np.isnan(got[2])
 
 
 @pytest.mark.parametrize("log", [False, True])
 def test_dense_search_finds_the_point_scoring_every_point_finds(log):
-    """Consistency check of two code paths of ours: the search ranks its 121 points by a chi-square
-    summed over blocks of points and scores the best few one by one; scoring every point one by one
+    """Consistency check of two code paths of ours: the search ranks its 121 points by the objective J
+    computed over blocks of points and scores the best few one by one; scoring every point one by one
     (the reference loop below, the search as it was) gives the same magnitude and the same comparison.
     Five runs whose signals move non-linearly with the magnitude, 1 % noise; the minimum lies between
-    screening points, and a point near it has a chi-square within round-off of a neighbour's only by
+    screening points, and a point near it has a J within round-off of a neighbour's only by
     chance (none here: the check is exact)."""
     from types import SimpleNamespace
 
@@ -556,9 +583,9 @@ def test_dense_search_finds_the_point_scoring_every_point_finds(log):
     for ud in np.linspace(u[0], u[-1], DENSE):
         row = interp(ud)
         c = target.score({k: row[sizes[i]:sizes[i + 1]] for i, k in enumerate(ids)})
-        if best is None or c.chi2 < best[1].chi2:
+        if best is None or c.objective < best[1].objective:
             best = (float(np.exp(ud) if log else ud), c)
-    assert x == best[0] and cmp.chi2 == best[1].chi2
+    assert x == best[0] and cmp.objective == best[1].objective
     assert abs(x - truth) < 0.1 * truth
 
 

@@ -25,13 +25,14 @@ def _signals(u: np.ndarray) -> np.ndarray:
 
 
 class _ClosedForm(CauseFitter):
-    """A :class:`CauseFitter` whose runs are :func:`_signals` against the truth's (no pool, no target)."""
+    """A :class:`CauseFitter` whose runs are :func:`_signals` against the truth's (no pool, no target); its
+    objective, by which a fit keeps its best point, is the residual's norm (monotone in its chi-square)."""
 
     def runs(self, us, ahead=()):   # no pool: nothing runs ahead (spare 0)
         for u in us:
             if u.tobytes() not in self.cache:
                 r = _signals(u) - _signals(TRUTH)
-                self.cache[u.tobytes()] = SimpleNamespace(chi2=float(r @ r), r=r)
+                self.cache[u.tobytes()] = SimpleNamespace(chi2=float(r @ r), objective=float(np.sqrt(r @ r)), r=r)
         return [self.cache[u.tobytes()] for u in us]
 
     def residuals(self, us, ahead=()):
@@ -41,7 +42,8 @@ class _ClosedForm(CauseFitter):
 def _start(u: np.ndarray) -> Evaluated:
     c = Candidate("ballast_void", 3)
     r = _signals(u) - _signals(TRUTH)
-    return Evaluated(c, kind_of(c).from_unit(u), SimpleNamespace(chi2=float(r @ r), r=r), 1, "confirmed")
+    return Evaluated(c, kind_of(c).from_unit(u), SimpleNamespace(chi2=float(r @ r), objective=float(np.sqrt(r @ r)), r=r),
+                     1, "confirmed")
 
 
 def test_a_void_fit_leaves_a_hanging_uniform_start():
@@ -95,7 +97,7 @@ def test_a_point_run_ahead_waits_until_asked_for(monkeypatch):
     monkeypatch.setattr(selection, "kind_of", lambda c: kind)
     # a run at v > 0.9 "diverges": checked_comparison gives no comparison and its reason
     monkeypatch.setattr(selection, "checked_comparison",
-                        lambda target, run, ref: (None, "diverged") if run > 0.9 else (SimpleNamespace(chi2=run), None))
+                        lambda target, run, ref: (None, "diverged") if run > 0.9 else (SimpleNamespace(objective=run), None))
 
     class Pool:
         spare, ahead_runs, ahead_used, dropped, rounds = 1, 0, 0, [], []
@@ -112,13 +114,13 @@ def test_a_point_run_ahead_waits_until_asked_for(monkeypatch):
                 setattr(self, name, getattr(self, name) + value)
 
     pool = Pool()
-    start = Evaluated(SimpleNamespace(label="stand-in", sleeper=None), np.array([0.5]), SimpleNamespace(chi2=0.5),
+    start = Evaluated(SimpleNamespace(label="stand-in", sleeper=None), np.array([0.5]), SimpleNamespace(objective=0.5),
                       1, "confirmed")
     fitter = CauseFitter(pool=pool, target=None, raw={}, start=start, reference=None)
     u1, u2, u3 = np.array([0.3]), np.array([0.95]), np.array([0.2])
-    assert fitter.runs([u1], ahead=[u2, u3])[0].chi2 == 0.3
+    assert fitter.runs([u1], ahead=[u2, u3])[0].objective == 0.3
     assert pool.rounds == [3] and pool.ahead_runs == 2
-    assert list(fitter.cache) == [u1.tobytes()] and pool.dropped == []     # u3 (chi2 0.2) is not yet best
+    assert list(fitter.cache) == [u1.tobytes()] and pool.dropped == []     # u3 (J 0.2) is not yet best
     assert np.array_equal(fitter.best(), u1)
     assert fitter.runs([u2, u1]) == [None, fitter.cache[u1.tobytes()]]
     assert pool.rounds == [3] and pool.ahead_used == 1 and pool.dropped == ["diverged"]   # no second run

@@ -231,25 +231,35 @@ def _scale_and_sigma(k, m: np.ndarray, ok: np.ndarray, sigma: dict, scale: dict 
     return sc, sg
 
 
-def chi2_rows(measured, rows: np.ndarray, ids: list, sizes: np.ndarray, sigma: dict,
-              scale: dict | None = None, gains: dict | None = None) -> np.ndarray:
-    """The chi-square :func:`score` gives each row of ``rows`` (many simulations on the measured
-    base at once: channel ``ids[i]`` in columns ``sizes[i]:sizes[i+1]``), to rank them.
+def objective_rows(measured, rows: np.ndarray, ids: list, sizes: np.ndarray, groups: dict, weights: dict,
+                   scale: dict | None = None, gains: dict | None = None) -> np.ndarray:
+    """The objective J :func:`score` gives each row of ``rows`` (many simulations on the measured base at
+    once: channel ``ids[i]`` in columns ``sizes[i]:sizes[i+1]``), to rank them.
 
-    The same terms, summed over whole arrays (another order of additions: equal to
-    :func:`score`'s to round-off, not to the last bit). A row whose channel has fewer than
-    2 valid samples gets NaN (:func:`score` raises there).
+    Per channel the nRMSE over its valid samples, then :func:`objective_from_channels`'s group means
+    and weights, over whole arrays (equal to :func:`score`'s J to round-off). A row whose channel has
+    fewer than 2 valid samples gets NaN.
     """
     gains = gains or {}
-    out = np.zeros(rows.shape[0])
+    nr = {}
+    bad = np.zeros(rows.shape[0], bool)
     for i, k in enumerate(ids):
         m = measured.channels[k]
         r = gains.get(k, 1.0) * rows[:, sizes[i]:sizes[i + 1]] - m
         ok = np.isfinite(r)
         n = ok.sum(axis=1)
-        _, sg = _scale_and_sigma(k, m, ok[0], sigma, scale)
-        out += np.where(ok, (r / sg) ** 2, 0.0).sum(axis=1)
-        out[n < 2] = np.nan
+        sc, _ = _scale_and_sigma(k, m, ok[0], {}, scale)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rmse = np.sqrt(np.where(ok, r * r, 0.0).sum(axis=1) / n)
+        nr[k] = rmse / sc if sc > 0 else np.full(rows.shape[0], np.inf)
+        bad |= n < 2
+    by_group: dict[str, list] = {}
+    for k, v in nr.items():
+        by_group.setdefault(groups[k], []).append(v)
+    wsum = sum(weights.get(g, 1.0) for g in by_group)
+    out = sum(weights.get(g, 1.0) * np.mean(v, axis=0) for g, v in by_group.items()) / wsum
+    out = np.asarray(out, float)
+    out[bad] = np.nan
     return out
 
 
@@ -290,7 +300,7 @@ def score(measured, on: dict, groups: dict, weights: dict, sigma: dict, shift: f
     return Comparison(float(shift), channels, gmean, J, chi2, n_all, residuals, on)
 
 
-__all__ = ["Comparison", "Target", "channel_scales", "chi2_rows", "compare", "score", "on_measured_base", "noise_sigma",
+__all__ = ["Comparison", "Target", "channel_scales", "objective_rows", "compare", "score", "on_measured_base", "noise_sigma",
            "objective_from_channels"]
 
 
@@ -365,9 +375,10 @@ class Target:
         return score(self.measured, on, lay.groups, lay.weights, self.sigma, self.shift or 0.0, self.scale,
                      self.gains)
 
-    def chi2_rows(self, rows: np.ndarray, ids: list, sizes: np.ndarray) -> np.ndarray:
-        """:func:`chi2_rows` of many simulations on the measured time base (to rank them)."""
-        return chi2_rows(self.measured, rows, ids, sizes, self.sigma, self.scale, self.gains)
+    def objective_rows(self, rows: np.ndarray, ids: list, sizes: np.ndarray) -> np.ndarray:
+        """:func:`objective_rows` of many simulations on the measured time base (to rank them)."""
+        lay = self.layout
+        return objective_rows(self.measured, rows, ids, sizes, lay.groups, lay.weights, self.scale, self.gains)
 
     def weighted_residuals(self, cmp: Comparison) -> np.ndarray:
         """One vector whose sum of squares is ``sum_g w_g mean_{i in g} nRMSE_i^2 / sum_g w_g``.

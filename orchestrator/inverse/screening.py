@@ -5,8 +5,8 @@ is one candidate at one parameter vector with its comparison and BIC; a candidat
 screened at the magnitudes of :func:`scalar_axis` and its best magnitude found by
 :func:`dense_search`, which interpolates the screening runs' *signals* (monotone cubic
 in the magnitude, log scale for stiffness factors) instead of running more: the
-:data:`DENSE` points are ranked by their chi-square computed over whole blocks of points
-(:func:`orchestrator.inverse.objective.chi2_rows`), and the best :data:`DENSE_EXACT` are
+:data:`DENSE` points are ranked by their objective J computed over whole blocks of points
+(:func:`orchestrator.inverse.objective.objective_rows`), and the best :data:`DENSE_EXACT` are
 scored one by one, as every point once was (121 full scores a search were a tenth of a
 diagnosis's wall time, in its main process while the workers waited).
 
@@ -36,7 +36,7 @@ from orchestrator.inverse.objective import Comparison, Target
 
 DENSE = 121          # points of the 1-D search between screening runs
 DENSE_BLOCK = 16     # points interpolated and ranked at once (16 x the channels' samples in memory)
-DENSE_EXACT = 4      # the best-ranked points scored exactly (the ranking's chi-square differs in round-off)
+DENSE_EXACT = 4      # the best-ranked points scored exactly (the ranking's J differs in round-off)
 
 log = logging.getLogger(__name__)
 
@@ -273,14 +273,14 @@ def dense_search(target: Target, kind, xs: np.ndarray, signals: list[dict]) -> t
     for b in range(0, DENSE, DENSE_BLOCK):   # ranked on whole blocks of points
         rows = interp(grid[b:b + DENSE_BLOCK])
         rows[:, masked] = np.nan
-        rank[b:b + DENSE_BLOCK] = target.chi2_rows(rows, ids, sizes)
+        rank[b:b + DENSE_BLOCK] = target.objective_rows(rows, ids, sizes)
     best = None
     for ud in grid[np.sort(_lowest(rank, DENSE_EXACT))]:   # the best few scored one by one, in grid order
         row = interp(ud)
         row[masked] = np.nan
         on = {k: row[sizes[i]:sizes[i + 1]] for i, k in enumerate(ids)}
         cmp = target.score(on)
-        if best is None or cmp.chi2 < best[1].chi2:
+        if best is None or cmp.objective < best[1].objective:
             best = (float(np.exp(ud) if kind.log else ud), cmp)
     return best
 

@@ -15,12 +15,24 @@ next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of
    a void first as a wedge, :func:`cause_stages`, started from its screened profile (uniform gap or wedge)
    or a one-sided wedge, whichever fits better, and from the next of them when the fit cannot leave
    that start: a hanging sleeper has no gradient), all parameters of the best and of
-   up to :data:`FIT` - 1 runners-up within a chi-square factor :data:`FIT_RATIO`; the candidates' fits
+   up to :data:`FIT` - 1 runners-up within a chi-square factor :data:`FIT_RATIO` (J within its square root); the candidates' fits
    of a stage run side by side (:func:`side_by_side`, same results as one after another);
 5. :func:`_rank`: the fitted and confirmed candidates by their BIC on the effective
    sample size (:func:`orchestrator.inverse.significance.bic_eff`, N_eff of the best
    one's residual for all of them, so they compare like with like), and who cannot be
    told apart from whom (within :data:`~orchestrator.inverse.significance.DELTA_BIC`).
+
+**One criterion.** Every choice of a round — the dense search's point and the screening proxy, which
+candidates are confirmed, which are fitted fully, the point a fit keeps, round 2's superposed ranking —
+is made by the objective J, the measure the gain is reported in (and the one a fit's least squares
+minimise, squared); only the ranking of the fitted candidates and the naming use the BIC on the
+effective sample size (:mod:`orchestrator.inverse.significance`). Until 2026-11-27 those choices were
+by chi-square, whose optimum can sit elsewhere when a model-form mismatch leaves a residual the noise
+level does not describe: a global pad beside a vehicle mismatch (field matrix pad_global+mismatch 7101)
+was fitted towards J's optimum and then kept at its start, the point of least chi-square, 30 % gain
+against the truth's 57 %; by J 51 %. Changing only some links moved borderline cases at the others
+(RESULTS, session 20); the whole chain by J, on the field matrix: the gains of 25 of 51 diagnoses
+changed, by -8 to +21 points (median +0.1 of those), none of the answers (RESULTS, session 21).
 
 Variants whose run cannot be compared (stopped early, non-finite signals, outside the
 record) are left out with their reason (:attr:`orchestrator.inverse.screening.Pool.dropped`);
@@ -42,7 +54,7 @@ from orchestrator.inverse.significance import DELTA_BIC, bic_eff, channel_neff
 
 CONFIRM = 4          # candidates re-run at their screened optimum
 FIT = 2              # candidates whose full parameter set is fitted, at most ...
-FIT_RATIO = 2.0      # ... of those whose confirmed chi-square is within this factor of the best's
+FIT_RATIO = 2.0      # ... of those whose coarse fit's J is within this factor's square root of the best's (J ~ sqrt(chi2))
 FIT_MAX_NFEV = 5     # least-squares iterations of a coarse fit (each: one run + a parallel Jacobian) ...
 FINE_MAX_NFEV = 8    # ... and of the fine stages (six gaps)
 PENALTY = 10.0       # residual of a point whose run failed, times the reference's (inside a fit)
@@ -129,9 +141,9 @@ class CauseFitter:
                 else PENALTY * self.target.weighted_residuals(self.reference) for cm in self.runs(us, ahead)]
 
     def best(self) -> np.ndarray:
-        """The cached point of least chi-square."""
+        """The cached point of least objective J (module doc, "One criterion")."""
         ok = {b: cm for b, cm in self.cache.items() if cm is not None}
-        return np.frombuffer(min(ok, key=lambda b: ok[b].chi2), dtype=float).copy()
+        return np.frombuffer(min(ok, key=lambda b: ok[b].objective), dtype=float).copy()
 
     def fit(self, start: Evaluated, stages: slice, max_nfev: int) -> Evaluated:
         """Bounded least squares through ``cause_stages(kind)[stages]`` from ``start``."""
@@ -154,7 +166,7 @@ class CauseFitter:
             if any(cm is not None for cm in self.cache.values()):
                 u_best = self.best()
         best = self.cache.get(u_best.tobytes())
-        if best is None or best.chi2 > start.cmp.chi2:   # the fit never did better than its start
+        if best is None or best.objective > start.cmp.objective:   # the fit never did better than its start
             return Evaluated(start.candidate, start.values, start.cmp, k, "fitted")
         return Evaluated(start.candidate, kind.from_unit(u_best), best, k, "fitted")
 
@@ -173,8 +185,8 @@ class CauseFitter:
         """
         ends = [u[[0, -1]], np.array([u.max(), 0.0]), np.array([0.0, u.max()])]
         comps = self.runs([np.clip(to_u(p), 0.0, 1.0) for p in ends])
-        chi2 = [cm.chi2 if cm is not None else np.inf for cm in comps]
-        order = [i for i in np.argsort(chi2, kind="stable") if np.isfinite(chi2[i])]
+        j = [cm.objective if cm is not None else np.inf for cm in comps]
+        order = [i for i in np.argsort(j, kind="stable") if np.isfinite(j[i])]
         return [ends[i] for i in order] or [ends[0]]
 
     def jacobian(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -199,7 +211,7 @@ class Round:
         Parameters already fitted in it.
     ranked : list of Evaluated
         Every candidate's last evaluation: the fitted and confirmed ones by BIC on N_eff,
-        then the screened ones by chi-square.
+        then the screened ones by J.
     real : list of Evaluated
         The fitted and confirmed candidates of ``ranked``.
     bic : dict
@@ -267,14 +279,14 @@ def _search_one(target: Target, c, axes_c: list, screened_c: list, dense: dict, 
         if xs.size < 2:
             continue
         x_best, cmp = dense_search(target, kind_of(c), xs, [grid[x] for x in xs])
-        if c not in dense or cmp.chi2 < dense[c].cmp.chi2:
+        if c not in dense or cmp.objective < dense[c].cmp.objective:
             dense[c] = Evaluated(c, kind_of(c).scalar_to_vector(x_best, profile), cmp, 1, "screened")
             grids[c] = grid
 
 
 def _confirm(pool: Pool, target: Target, raw: dict, ref: Evaluated, dense: dict, confirm: int) -> dict:
     """Step 3: the ``confirm`` best screened candidates re-run at their best magnitude."""
-    top = sorted(dense, key=lambda c: dense[c].cmp.chi2)[:confirm]
+    top = sorted(dense, key=lambda c: dense[c].cmp.objective)[:confirm]
     pool.expect(len(top))
     got = pool.map([kind_of(c).apply(raw, c.sleeper, dense[c].values) for c in top],
                    then=lambda run: checked_comparison(target, run, ref.cmp))
@@ -299,10 +311,10 @@ def _fits(pool: Pool, target: Target, raw: dict, ref: Evaluated, confirmed: dict
                                  for c in confirmed})
     if not fitted:
         return fitted, fitters
-    by_fit = sorted(fitted, key=lambda c: fitted[c].cmp.chi2)
-    lead = fitted[by_fit[0]].cmp.chi2
+    by_fit = sorted(fitted, key=lambda c: fitted[c].cmp.objective)
+    lead = fitted[by_fit[0]].cmp.objective
     fine = {}
-    for c in [c for c in by_fit if fitted[c].cmp.chi2 <= FIT_RATIO * lead][:FIT]:
+    for c in [c for c in by_fit if fitted[c].cmp.objective <= FIT_RATIO ** 0.5 * lead][:FIT]:
         stages = cause_stages(kind_of(c))
         if len(stages) > 1:
             pool.expect(FINE_MAX_NFEV * sum(n + 1 for n, _ in stages[1:]))
@@ -337,7 +349,7 @@ def _rank(target: Target, ref: Evaluated, k_ref: int, dense: dict, confirmed: di
     """Step 5: the fitted and confirmed candidates by BIC on N_eff, then the screened ones; who are twins."""
     final = {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}
     real = [e for e in final.values() if e.stage in ("fitted", "confirmed")]
-    rest = sorted((e for e in final.values() if e.stage == "screened"), key=lambda e: e.cmp.chi2)
+    rest = sorted((e for e in final.values() if e.stage == "screened"), key=lambda e: e.cmp.objective)
     if not real:
         return Round(ref, k_ref, rest, [], {}, {}, fitters)
     neff = channel_neff(min(real, key=lambda e: e.cmp.chi2).cmp)
@@ -390,7 +402,7 @@ def superposed_ranking(target: Target, first: Round, extended: Evaluated, cands:
     each candidate's screening signals of round 1 enter as a change on top of the extended
     model's, ``s_ext + (s_c(x) - s_ref)`` (superposition: a second effect changes the
     signals about as it did on the nominal model, to first order), and the dense 1-D
-    search ranks them by chi-square. The best few are then screened and fitted for real.
+    search ranks them by J. The best few are then screened and fitted for real.
     """
     ref = first.reference.cmp.simulated
     out = []
@@ -400,7 +412,7 @@ def superposed_ranking(target: Target, first: Round, extended: Evaluated, cands:
         if xs.size < 2:
             continue
         sig = [{k: extended.cmp.simulated[k] + (grid[x][k] - ref[k]) for k in ref} for x in xs]
-        out.append((dense_search(target, kind_of(c), xs, sig)[1].chi2, c))
+        out.append((dense_search(target, kind_of(c), xs, sig)[1].objective, c))
     return [c for _, c in sorted(out, key=lambda t: t[0])]
 
 
