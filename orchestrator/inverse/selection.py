@@ -32,7 +32,7 @@ level does not describe: a global pad beside a vehicle mismatch (field matrix pa
 was fitted towards J's optimum and then kept at its start, the point of least chi-square, 30 % gain
 against the truth's 57 %; by J 51 %. Changing only some links moved borderline cases at the others
 (RESULTS, session 20); the whole chain by J, on the field matrix: the gains of 25 of 51 diagnoses
-changed, by -8 to +21 points (median +0.1 of those), none of the answers (RESULTS, session 21).
+changed, by -8 to +21 points (median +0.1 of those; worn_nose+mismatch 7202 +9.6), none of the answers (RESULTS, session 21).
 
 Variants whose run cannot be compared (stopped early, non-finite signals, outside the
 record) are left out with their reason (:attr:`orchestrator.inverse.screening.Pool.dropped`);
