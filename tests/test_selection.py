@@ -42,8 +42,8 @@ class _ClosedForm(CauseFitter):
 def _start(u: np.ndarray) -> Evaluated:
     c = Candidate("ballast_void", 3)
     r = _signals(u) - _signals(TRUTH)
-    return Evaluated(c, kind_of(c).from_unit(u), SimpleNamespace(chi2=float(r @ r), objective=float(np.sqrt(r @ r)), r=r),
-                     1, "confirmed")
+    cmp = SimpleNamespace(chi2=float(r @ r), objective=float(np.sqrt(r @ r)), r=r)
+    return Evaluated(c, kind_of(c).from_unit(u), cmp, 1, "confirmed")
 
 
 def test_a_void_fit_leaves_a_hanging_uniform_start():

@@ -660,7 +660,8 @@ def _settings(cands: list[Candidate], looked_further: bool = False) -> dict:
     (``diagnosis.json`` ``settings``)."""
     return {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL, "none_margin": NONE_MARGIN,
             "loud_factor": LOUD_FACTOR, "confirm": CONFIRM, "fit": FIT, "sensor_reach": SENSOR_REACH,
-            "far_reach": FAR_REACH, "looked_further": looked_further, "max_causes": MAX_CAUSES, "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM,
+            "far_reach": FAR_REACH, "looked_further": looked_further, "max_causes": MAX_CAUSES,
+            "second_round": SECOND_ROUND, "second_confirm": SECOND_CONFIRM,
             "candidates": [c.label for c in cands]}
 
 

@@ -15,8 +15,9 @@ next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of
    a void first as a wedge, :func:`cause_stages`, started from its screened profile (uniform gap or wedge)
    or a one-sided wedge, whichever fits better, and from the next of them when the fit cannot leave
    that start: a hanging sleeper has no gradient), all parameters of the best and of
-   up to :data:`FIT` - 1 runners-up within a chi-square factor :data:`FIT_RATIO` (J within its square root); the candidates' fits
-   of a stage run side by side (:func:`side_by_side`, same results as one after another);
+   up to :data:`FIT` - 1 runners-up whose J is within sqrt(:data:`FIT_RATIO`) of the best's (the chi-square
+   factor it was); the candidates' fits of a stage run side by side (:func:`side_by_side`, same results as one
+   after another);
 5. :func:`_rank`: the fitted and confirmed candidates by their BIC on the effective
    sample size (:func:`orchestrator.inverse.significance.bic_eff`, N_eff of the best
    one's residual for all of them, so they compare like with like), and who cannot be
@@ -32,7 +33,8 @@ level does not describe: a global pad beside a vehicle mismatch (field matrix pa
 was fitted towards J's optimum and then kept at its start, the point of least chi-square, 30 % gain
 against the truth's 57 %; by J 51 %. Changing only some links moved borderline cases at the others
 (RESULTS, session 20); the whole chain by J, on the field matrix: the gains of 25 of 51 diagnoses
-changed, by -8 to +21 points (median +0.1 of those; worn_nose+mismatch 7202 +9.6), none of the answers (RESULTS, session 21).
+changed, by -8 to +21 points (median +0.1 of those; worn_nose+mismatch 7202 +9.6), none of the
+answers (RESULTS, session 21).
 
 Variants whose run cannot be compared (stopped early, non-finite signals, outside the
 record) are left out with their reason (:attr:`orchestrator.inverse.screening.Pool.dropped`);
@@ -54,7 +56,7 @@ from orchestrator.inverse.significance import DELTA_BIC, bic_eff, channel_neff
 
 CONFIRM = 4          # candidates re-run at their screened optimum
 FIT = 2              # candidates whose full parameter set is fitted, at most ...
-FIT_RATIO = 2.0      # ... of those whose coarse fit's J is within this factor's square root of the best's (J ~ sqrt(chi2))
+FIT_RATIO = 2.0      # ... of those whose coarse fit's J is within this factor's square root of the best's
 FIT_MAX_NFEV = 5     # least-squares iterations of a coarse fit (each: one run + a parallel Jacobian) ...
 FINE_MAX_NFEV = 8    # ... and of the fine stages (six gaps)
 PENALTY = 10.0       # residual of a point whose run failed, times the reference's (inside a fit)
