@@ -191,9 +191,9 @@ def test_void_two_sleepers_beyond_the_sensors_is_named_there(tmp_path):
     and looking only 1 sleeper beyond answered ``unexplained`` (RESULTS, session 21); here it comes through
     the mild mismatch of the other field-like cases, with which the truth itself removes only ~41 % of J
     (measured): issue 14's 50 % floor is out of any diagnosis's reach on this record, so the gain is held to
-    the truth's own (:func:`hypothesis_gains`, the same reference) less 5 points — the lowest named-minus-truth
-    of the matrix's right single-effect answers without mismatch, -4.3 points (RESULTS, session 21), rounded
-    up; measured 38.7 % against 40.7 %."""
+    the truth's own (:func:`hypothesis_gains`, the same reference) less 6 points — the lowest named-minus-truth
+    of the field matrix's right single-effect answers with model mismatch, -5.9 points (RESULTS, 2026-11-27
+    08:40), rounded up; measured 38.7 % against 40.7 %."""
     from orchestrator.inverse.diagnose import FAR_REACH, SENSOR_REACH
 
     case, passage = _field_passage(tmp_path, "void_far")
@@ -204,7 +204,8 @@ def test_void_two_sleepers_beyond_the_sensors_is_named_there(tmp_path):
           f"{result['wall_seconds']:.0f} s")
     assert a["kind"] == "named" and _named_right(a["causes"][0], case["effects"][0]), a
     truth = hypothesis_gains(SCENARIO, passage, [case["effects"]], tmp_path / "truth", workers=2)
-    assert result["gain"]["total"] >= truth["hypotheses"][0]["gain"] - 0.05, (result["gain"], truth)
+    print(f"void_far: gain {result['gain']['total']:.3f}, the truth's own {truth['hypotheses'][0]['gain']:.3f}")
+    assert result["gain"]["total"] >= truth["hypotheses"][0]["gain"] - 0.06, (result["gain"], truth)
     labels = result["settings"]["candidates"]   # round 1 widened: the far sleepers were screened, both sides
     assert {"ballast_void@25", "ballast_void@26", "ballast_void@16"} <= set(labels), labels
     assert result["settings"]["far_reach"] == FAR_REACH > SENSOR_REACH and result["settings"]["looked_further"]

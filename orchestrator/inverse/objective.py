@@ -86,13 +86,20 @@ def noise_sigma(x: np.ndarray) -> float:
 
 def objective_from_channels(nrmse: dict, groups: dict, weights: dict) -> tuple[float, dict]:
     """J and the per-group mean nRMSE from channel nRMSEs (module docstring)."""
-    by_group: dict[str, list[float]] = {}
+    J, gmean = _group_weighted(nrmse, groups, weights)
+    return float(J), {g: float(v) for g, v in gmean.items()}
+
+
+def _group_weighted(nrmse: dict, groups: dict, weights: dict) -> tuple:
+    """(J, group -> mean nRMSE) of channel nRMSEs that are numbers or equal-length arrays (one entry per
+    simulation: :func:`objective_rows`), elementwise."""
+    by_group: dict[str, list] = {}
     for sid, value in nrmse.items():
         by_group.setdefault(groups[sid], []).append(value)
-    gmean = {g: float(np.mean(v)) for g, v in by_group.items()}
+    gmean = {g: np.mean(v, axis=0) for g, v in by_group.items()}
     wsum = sum(weights.get(g, 1.0) for g in gmean)
     J = sum(weights.get(g, 1.0) * v for g, v in gmean.items()) / wsum if wsum > 0 else float("nan")
-    return float(J), gmean
+    return J, gmean
 
 
 def _energy_window(t: np.ndarray, r: np.ndarray, share: float = 0.8) -> list[float]:
@@ -236,8 +243,8 @@ def objective_rows(measured, rows: np.ndarray, ids: list, sizes: np.ndarray, gro
     """The objective J :func:`score` gives each row of ``rows`` (many simulations on the measured base at
     once: channel ``ids[i]`` in columns ``sizes[i]:sizes[i+1]``), to rank them.
 
-    Per channel the nRMSE over its valid samples, then :func:`objective_from_channels`'s group means
-    and weights, over whole arrays (equal to :func:`score`'s J to round-off). A row whose channel has
+    Per channel the nRMSE over its valid samples, then the group means and weights of
+    :func:`objective_from_channels` (:func:`_group_weighted`), over whole arrays (equal to :func:`score`'s J to round-off). A row whose channel has
     fewer than 2 valid samples gets NaN.
     """
     gains = gains or {}
@@ -253,12 +260,7 @@ def objective_rows(measured, rows: np.ndarray, ids: list, sizes: np.ndarray, gro
             rmse = np.sqrt(np.where(ok, r * r, 0.0).sum(axis=1) / n)
         nr[k] = rmse / sc if sc > 0 else np.full(rows.shape[0], np.inf)
         bad |= n < 2
-    by_group: dict[str, list] = {}
-    for k, v in nr.items():
-        by_group.setdefault(groups[k], []).append(v)
-    wsum = sum(weights.get(g, 1.0) for g in by_group)
-    out = sum(weights.get(g, 1.0) * np.mean(v, axis=0) for g, v in by_group.items()) / wsum
-    out = np.asarray(out, float)
+    out = np.array(_group_weighted(nr, groups, weights)[0], float)
     out[bad] = np.nan
     return out
 

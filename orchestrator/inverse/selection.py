@@ -15,8 +15,7 @@ next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of
    a void first as a wedge, :func:`cause_stages`, started from its screened profile (uniform gap or wedge)
    or a one-sided wedge, whichever fits better, and from the next of them when the fit cannot leave
    that start: a hanging sleeper has no gradient), all parameters of the best and of
-   up to :data:`FIT` - 1 runners-up whose J is within sqrt(:data:`FIT_RATIO`) of the best's (the chi-square
-   factor it was); the candidates' fits of a stage run side by side (:func:`side_by_side`, same results as one
+   up to :data:`FIT` - 1 runners-up whose J is within a factor :data:`FIT_RATIO` of the best's; the candidates' fits of a stage run side by side (:func:`side_by_side`, same results as one
    after another);
 5. :func:`_rank`: the fitted and confirmed candidates by their BIC on the effective
    sample size (:func:`orchestrator.inverse.significance.bic_eff`, N_eff of the best
@@ -56,7 +55,7 @@ from orchestrator.inverse.significance import DELTA_BIC, bic_eff, channel_neff
 
 CONFIRM = 4          # candidates re-run at their screened optimum
 FIT = 2              # candidates whose full parameter set is fitted, at most ...
-FIT_RATIO = 2.0      # ... of those whose coarse fit's J is within this factor's square root of the best's
+FIT_RATIO = 2 ** 0.5  # ... of those whose coarse fit's J is within this factor of the best's (chi-square's factor 2)
 FIT_MAX_NFEV = 5     # least-squares iterations of a coarse fit (each: one run + a parallel Jacobian) ...
 FINE_MAX_NFEV = 8    # ... and of the fine stages (six gaps)
 PENALTY = 10.0       # residual of a point whose run failed, times the reference's (inside a fit)
@@ -235,7 +234,6 @@ class Round:
     twins: dict
     fitters: dict
     screened: dict = field(default_factory=dict)
-    found: tuple = ()   # (dense, confirmed, fitted) as :func:`select` found them: what :func:`widen` adds to
 
 
 def _axes(kind, raw: dict, sleeper) -> list[tuple[np.ndarray | None, np.ndarray, float]]:
@@ -316,7 +314,7 @@ def _fits(pool: Pool, target: Target, raw: dict, ref: Evaluated, confirmed: dict
     by_fit = sorted(fitted, key=lambda c: fitted[c].cmp.objective)
     lead = fitted[by_fit[0]].cmp.objective
     fine = {}
-    for c in [c for c in by_fit if fitted[c].cmp.objective <= FIT_RATIO ** 0.5 * lead][:FIT]:
+    for c in [c for c in by_fit if fitted[c].cmp.objective <= FIT_RATIO * lead][:FIT]:
         stages = cause_stages(kind_of(c))
         if len(stages) > 1:
             pool.expect(FINE_MAX_NFEV * sum(n + 1 for n, _ in stages[1:]))
@@ -346,10 +344,10 @@ def side_by_side(pool: Pool, calls: dict) -> dict:
         threads.shutdown(wait=False)
 
 
-def _rank(target: Target, ref: Evaluated, k_ref: int, dense: dict, confirmed: dict, fitted: dict,
-          fitters: dict) -> Round:
-    """Step 5: the fitted and confirmed candidates by BIC on N_eff, then the screened ones; who are twins."""
-    final = {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}
+def _rank(target: Target, ref: Evaluated, k_ref: int, final: dict, fitters: dict) -> Round:
+    """Step 5: the fitted and confirmed candidates by BIC on N_eff, then the screened ones; who are twins.
+
+    ``final``: candidate -> its last evaluation (:func:`_explore`)."""
     real = [e for e in final.values() if e.stage in ("fitted", "confirmed")]
     rest = sorted((e for e in final.values() if e.stage == "screened"), key=lambda e: e.cmp.objective)
     if not real:
@@ -369,31 +367,31 @@ def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, ca
     ``confirm``: how many of the screened candidates are re-run and fitted (the later
     rounds of forward selection confirm fewer: they screen only a few).
     """
-    dense, grids, confirmed, fitted, fitters = _explore(pool, target, raw, ref, cands, confirm)
-    rd = _rank(target, ref, k_ref, dense, confirmed, fitted, fitters)
-    rd.screened, rd.found = grids, (dense, confirmed, fitted)
+    final, grids, fitters = _explore(pool, target, raw, ref, cands, confirm)
+    rd = _rank(target, ref, k_ref, final, fitters)
+    rd.screened = grids
     return rd
 
 
 def _explore(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, confirm: int) -> tuple:
-    """Steps 1-4 of a round for ``cands``: (dense, grids, confirmed, fitted, fitters) as the steps give them."""
+    """Steps 1-4 of a round for ``cands``: (candidate -> its last evaluation, fitted else confirmed else
+    screened; candidate -> its screening grid's signals; candidate -> its :class:`CauseFitter`)."""
     axes = {c: _axes(kind_of(c), raw, c.sleeper) for c in cands}
     pool.expect(sum(len(xs) - 1 for c in cands for _, xs, _ in axes[c]))
     dense, grids = _screen(pool, target, raw, ref, cands, axes)
     confirmed = _confirm(pool, target, raw, ref, dense, confirm)
     fitted, fitters = _fits(pool, target, raw, ref, confirmed)
-    return dense, grids, confirmed, fitted, fitters
+    return {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}, grids, fitters
 
 
 def widen(pool: Pool, target: Target, raw: dict, rd: Round, more: list, confirm: int = CONFIRM) -> Round:
     """Round ``rd`` (of :func:`select`, on ``raw``) with the candidates ``more`` added: they are screened,
     confirmed (their ``confirm`` best) and fitted as :func:`select` does, and ranked with ``rd``'s, on the
     same reference, as one round (:func:`_rank`; ``rd``'s runs are not repeated)."""
-    dense, grids, confirmed, fitted, fitters = _explore(pool, target, raw, rd.reference, more, confirm)
-    d0, c0, f0 = rd.found
-    out = _rank(target, rd.reference, rd.k_ref, {**d0, **dense}, {**c0, **confirmed}, {**f0, **fitted},
+    final, grids, fitters = _explore(pool, target, raw, rd.reference, more, confirm)
+    out = _rank(target, rd.reference, rd.k_ref, {**{e.candidate: e for e in rd.ranked}, **final},
                 {**rd.fitters, **fitters})
-    out.screened, out.found = {**rd.screened, **grids}, ({**d0, **dense}, {**c0, **confirmed}, {**f0, **fitted})
+    out.screened = {**rd.screened, **grids}
     return out
 
 
