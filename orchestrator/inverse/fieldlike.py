@@ -42,12 +42,13 @@ Families (:data:`FAMILIES`; every single-effect family also as ``<name>+mismatch
     two_void_pad      a void and a soft pad (x0.1-0.3) next to it  no        field
     two_nose_void     a worn nose and a void                       no        field
 
-Slow families (:data:`SLOW_FAMILIES`, not in :data:`FAMILIES`): the truth's crossing
-rail is the 3D solid (``track.model: solid``, :attr:`Mismatch.track_model`) —
-``null_solid`` (no effect) and ``void_sensor+solid``. They need the default sensor
-layout to resolve on the solid (issue 14 item 7); at the time of writing it does in a
-working tree, not yet at the committed head (the crossing rail's seats there are named
-``crossing_front``).
+Solid-truth families (:data:`SLOW_FAMILIES`, not in :data:`FAMILIES`): the truth's
+crossing rail is the 3D solid (``track.model: solid``, :attr:`Mismatch.track_model`) —
+``null_solid`` (no effect) and ``void_sensor+solid``; the default sensor layout gives all
+its channels on the solid (issue 14 item 7). Once slow (the solid's first build), they
+now take as long as the others (benchmarks/RESULTS.md, 2026-11-27: 6 passages written in
+45 s, diagnosed in 3.7 min); they stay apart so that the default matrix's 51 passages
+remain comparable between sessions (``--families`` takes them).
 
 The module draws and writes; it knows no answer. What a diagnosis should answer for a
 case (the scoring) lives in ``benchmarks/bench_diagnose_field.py``, out of reach of the
