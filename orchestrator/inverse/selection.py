@@ -146,6 +146,10 @@ class CauseFitter:
         ok = {b: cm for b, cm in self.cache.items() if cm is not None}
         return np.frombuffer(min(ok, key=lambda b: ok[b].objective), dtype=float).copy()
 
+    def best_objective(self) -> float:
+        """J of :meth:`best` (inf before any point ran)."""
+        return min((cm.objective for cm in self.cache.values() if cm is not None), default=np.inf)
+
     def fit(self, start: Evaluated, stages: slice, max_nfev: int) -> Evaluated:
         """Bounded least squares through ``cause_stages(kind)[stages]`` from ``start``."""
         from orchestrator.inverse.fitting import fit_unit_cube
@@ -164,6 +168,9 @@ class CauseFitter:
                 fit = fit_unit_cube(batch, p0, max_nfev=max_nfev, spare=spare)
                 if fit.cost < fit.cost_start:   # the fit left its start: no restart
                     break
+            if n == 2 and self.best_objective() >= start.cmp.objective:
+                # no start improved on the screened point: a hanging sleeper's plateau (flat J)
+                fit_unit_cube(batch, np.full(2, 0.5 * u_best.max()), max_nfev=max_nfev, spare=spare)
             if any(cm is not None for cm in self.cache.values()):
                 u_best = self.best()
         best = self.cache.get(u_best.tobytes())
