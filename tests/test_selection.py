@@ -66,6 +66,28 @@ def test_a_void_fit_leaves_a_hanging_uniform_start():
     assert fitted.values.max() > 0.0
 
 
+def test_a_void_fit_that_no_start_improves_tries_half_the_screened_gap():
+    """When no start of the wedge stage improves on the screened point (here the one-sided wedges' runs
+    are taken as failed, so the plateau is the only start, and no fit can leave it), the fitter tries
+    the uniform gap at half the screened peak, which touches the bed, and keeps the best point visited
+    (the field-like case void_off_sensor 7202 stayed on its plateau this way: RESULTS, session 22).
+
+    Closed form as above: the plateau at 0.7 has chi2 0.005; the start 0.35 (every point touching,
+    chi2 0.11) has a gradient, and the wedge 0.45 -> 0.7 (chi2 0.0025) is in reach of a fit from it.
+    """
+    plateau = np.full(6, 0.7)
+    start = _start(plateau)
+
+    class _NoWedges(_ClosedForm):
+        def _wedge_starts(self, u, to_u):
+            return [u[[0, -1]]]
+
+    fitter = _NoWedges(pool=None, target=None, raw={}, start=start, reference=None)
+    fitted = fitter.fit(start, slice(0, 1), FIT_MAX_NFEV)
+    assert any(np.allclose(np.frombuffer(b), 0.35) for b in fitter.cache)   # the half start ran
+    assert fitted.cmp.chi2 < 0.8 * start.cmp.chi2          # left the plateau (0.8: as in the test above)
+
+
 def test_a_void_fit_that_moves_from_its_first_start_is_not_restarted():
     """From a start with a gradient the fit moves and the other starts are never fitted: the fitter runs
     the two one-sided wedges (to choose the start) and exactly the points of one fit from the start
