@@ -193,7 +193,8 @@ def test_void_two_sleepers_beyond_the_sensors_is_named_there(tmp_path):
     (measured): issue 14's 50 % floor is out of any diagnosis's reach on this record, so the gain is held to
     the truth's own (:func:`hypothesis_gains`, the same reference) less 6 points — the lowest named-minus-truth
     of the field matrix's right single-effect answers with model mismatch, -5.9 points (RESULTS, 2026-11-27
-    08:40), rounded up; measured 38.7 % against 40.7 %."""
+    08:40, and the same in session 22's matrix), rounded up; measured 41.1 % against 40.7 % (38.7 % before the
+    wedge fit's half-gap start, selection.CauseFitter.fit, session 22)."""
     from orchestrator.inverse.diagnose import FAR_REACH, SENSOR_REACH
 
     case, passage = _field_passage(tmp_path, "void_far")
