@@ -474,6 +474,34 @@ def test_rule_rejects_a_small_systematic_improvement_and_accepts_a_real_one():
     assert not quiet.passes and quiet.to_json()["share_of_explainable_misfit"] is None   # JSON null, never NaN
 
 
+def test_share_of_a_misfit_within_the_noise_margin_is_measured_against_the_margin():
+    """A reference residual just above the noise (1 % white noise plus a bump of 0.6 % of each channel's
+    spread: J_ref ~1.04 J_noise) and a cause that removes the bump: it removes nearly all of J_ref - J_noise
+    (~100 %, what the rule measured before 2026-11-27 and named) but ~4 % of J. Within the margin of
+    ``none`` (J_ref <= 1.5 J_noise, README "turnout diagnose" (6)) the share is measured against that margin,
+    0.5 J_noise: below the quarter, not named. Hand computation: J_noise is the channels' mean noise nRMSE,
+    0.01 by construction (sigma = 1 % of each channel's std); the share is (J_ref - J_cause) / (0.5 x 0.01)."""
+    from orchestrator.inverse.significance import MIN_SHARE, assess
+
+    rng = np.random.default_rng(7)
+    n = 800
+    t = np.arange(n) * 2e-4
+    channels = {k: np.sin(2 * np.pi * 8 * t + i) for i, k in enumerate(["P1", "P2", "Q1", "Q2"])}
+    sd = {k: float(np.std(v)) for k, v in channels.items()}
+    target = _fake_target(channels, {k: 0.01 * sd[k] for k in channels})
+    bump = np.exp(-0.5 * ((t - 0.08) / 0.02) ** 2)
+    noise = {k: rng.normal(0, 0.01 * sd[k], n) for k in channels}
+    ref = _cmp_of(target, {k: 0.006 * sd[k] * bump + noise[k] for k in channels})
+    cause = _cmp_of(target, noise)
+    j_noise = 0.01
+    assert 1.0 < ref.objective / j_noise < 1.1, ref.objective          # just above the noise
+    old_share = (ref.objective - cause.objective) / (ref.objective - j_noise)
+    assert old_share >= MIN_SHARE, old_share                             # the old measure named it
+    ev = assess(cause, 1, ref, 0, target)
+    assert ev.share == pytest.approx((ref.objective - cause.objective) / (0.5 * j_noise), rel=1e-9), ev
+    assert ev.share < MIN_SHARE and not ev.passes and "share" in ev.failed, ev
+
+
 def test_interval_of_a_linear_fit_is_the_textbook_one():
     """:func:`unit_covariance` of a straight-line least-squares problem with white errors (N_eff = N) equals
     the textbook covariance s^2 (X^T X)^-1 (numpy lstsq residuals; independent formula); with the residual
