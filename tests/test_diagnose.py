@@ -442,6 +442,20 @@ def _cmp_of(target, residuals):
     return score(target.measured, on, target.layout.groups, target.layout.weights, target.sigma, 0.0, target.scale)
 
 
+def _bump_misfit(seed: int):
+    """Four 8 Hz channels in two groups (sigma 1 % of each one's spread), a 20 ms bump shape and a seeded
+    draw of that 1 % white noise: (channels, spreads, target, bump, noise) for the rule's hand-built cases."""
+    rng = np.random.default_rng(seed)
+    n = 800
+    t = np.arange(n) * 2e-4
+    channels = {k: np.sin(2 * np.pi * 8 * t + i) for i, k in enumerate(["P1", "P2", "Q1", "Q2"])}
+    sd = {k: float(np.std(v)) for k, v in channels.items()}
+    target = _fake_target(channels, {k: 0.01 * sd[k] for k in channels})
+    bump = np.exp(-0.5 * ((t - 0.08) / 0.02) ** 2)
+    noise = {k: rng.normal(0, 0.01 * sd[k], n) for k in channels}
+    return channels, sd, target, bump, noise
+
+
 def test_rule_rejects_a_small_systematic_improvement_and_accepts_a_real_one():
     """The issue's failure mode, built by hand: the nominal residual is a smooth misfit (10 % of each channel's
     spread, a 20 ms bump) plus 1 % white noise. A "cause" that shaves 2 % off the bump has a raw chi-square
@@ -450,14 +464,7 @@ def test_rule_rejects_a_small_systematic_improvement_and_accepts_a_real_one():
     fits group P and doubles group Q's misfit fails the held-out-group guard and the never-worse rule."""
     from orchestrator.inverse.significance import MIN_SHARE, assess
 
-    rng = np.random.default_rng(5)
-    n = 800
-    t = np.arange(n) * 2e-4
-    channels = {k: np.sin(2 * np.pi * 8 * t + i) for i, k in enumerate(["P1", "P2", "Q1", "Q2"])}
-    sd = {k: float(np.std(v)) for k, v in channels.items()}
-    target = _fake_target(channels, {k: 0.01 * sd[k] for k in channels})
-    bump = np.exp(-0.5 * ((t - 0.08) / 0.02) ** 2)
-    noise = {k: rng.normal(0, 0.01 * sd[k], n) for k in channels}
+    channels, sd, target, bump, noise = _bump_misfit(5)
     ref = _cmp_of(target, {k: 0.1 * sd[k] * bump + noise[k] for k in channels})
     shave = _cmp_of(target, {k: 0.098 * sd[k] * bump + noise[k] for k in channels})
     real = _cmp_of(target, noise)
@@ -483,14 +490,7 @@ def test_share_of_a_misfit_within_the_noise_margin_is_measured_against_the_margi
     0.01 by construction (sigma = 1 % of each channel's std); the share is (J_ref - J_cause) / (0.5 x 0.01)."""
     from orchestrator.inverse.significance import MIN_SHARE, assess
 
-    rng = np.random.default_rng(7)
-    n = 800
-    t = np.arange(n) * 2e-4
-    channels = {k: np.sin(2 * np.pi * 8 * t + i) for i, k in enumerate(["P1", "P2", "Q1", "Q2"])}
-    sd = {k: float(np.std(v)) for k, v in channels.items()}
-    target = _fake_target(channels, {k: 0.01 * sd[k] for k in channels})
-    bump = np.exp(-0.5 * ((t - 0.08) / 0.02) ** 2)
-    noise = {k: rng.normal(0, 0.01 * sd[k], n) for k in channels}
+    channels, sd, target, bump, noise = _bump_misfit(7)
     ref = _cmp_of(target, {k: 0.006 * sd[k] * bump + noise[k] for k in channels})
     cause = _cmp_of(target, noise)
     j_noise = 0.01
