@@ -598,14 +598,25 @@ def _pct(x) -> str:
     return "-" if x is None else f"{100 * x:.1f} %"
 
 
+def _family(name: str):
+    return FAMILIES.get(name) or SLOW_FAMILIES[name]
+
+
+def _model_form_mismatch(name: str) -> bool:
+    """The truth is another model than the diagnosed one: another vehicle, speed, damping, step, or the solid."""
+    fam = _family(name)
+    return fam.mismatch or fam.solid
+
+
 def _group(family: str) -> str:
-    if family.endswith("+solid") or family == "null_solid":
+    fam = _family(family)
+    if fam.solid:
         return "solid crossing rail as the truth (model-form mismatch)"
-    if family.startswith("null"):
+    if not fam.effects:
         return "nulls (incl. mismatch-only)"
-    if family.startswith("two_"):
+    if len(fam.effects) > 1:
         return "two effects"
-    return "single effects" + (", with model mismatch" if family.endswith("+mismatch") else ", no mismatch")
+    return "single effects" + (", with model mismatch" if fam.mismatch else ", no mismatch")
 
 
 def matrix(rows: list[dict]) -> str:
@@ -660,7 +671,7 @@ def summary(rows: list[dict], seeds: int, wall: float | None, detect: dict | Non
         if r["truth"]["effects"] and r["right"] and r["answer"]["gain"] is not None:
             gains.setdefault(_group(r["family"]), []).append((r["answer"]["gain"], r))
     for g, v in gains.items():
-        need = GAIN_MIN_MISMATCH if "mismatch)" in g or "with model mismatch" in g else GAIN_MIN   # a 3D crossing is one
+        need = GAIN_MIN_MISMATCH if _model_form_mismatch(v[0][1]["family"]) else GAIN_MIN
         x = [a for a, _ in v]
         below = [r["answer"] for a, r in v if a < need and r["answer"]["kind"] == "cause"]
         quiet = sum(bool(ans.get("rest_quiet")) for ans in below)
