@@ -219,3 +219,42 @@ def test_pool_gives_a_freed_worker_to_the_shortest_queue_and_close_cancels_the_w
         raise AssertionError("a cancelled run gave a result")
     except CancelledError:
         pass
+
+
+def test_a_gap_that_never_touches_the_bed_is_tried_closed():
+    """A six-gap fit cannot move a gap whose point never touches the bed (its derivative is exactly 0: on
+    the plateau above the sleeper's deflection, every gap gives the same J); the fitter then tries those
+    gaps closed and fits again from there when that is better (field-like case void_off_sensor 7303:
+    RESULTS, session 23).
+
+    Closed form as above, truth (0.3, 0.3, 0.3, 0.3, 0, 0): the last two points bear (signal d = 0.5
+    each). From (0.3, 0.3, 0.3, 0.3, 0.7, 0.7) they hang: residual -0.5 at each, chi2 0.5, and a zero
+    column in the Jacobian. Closed, chi2 0 (the start's first four points are the truth's already).
+    A gap that bears (a non-zero column) is never closed: from (0.2, 0.3, 0.3, 0.3, 0.7, 0.7) the first
+    point is fitted (to 0.3) and not set to 0."""
+    from orchestrator.inverse import selection
+
+    truth = np.array([0.3, 0.3, 0.3, 0.3, 0.0, 0.0])
+
+    class _Ends(_ClosedForm):
+        def runs(self, us, ahead=()):
+            for u in us:
+                if u.tobytes() not in self.cache:
+                    r = _signals(u) - _signals(truth)
+                    self.cache[u.tobytes()] = SimpleNamespace(chi2=float(r @ r), objective=float(np.sqrt(r @ r)), r=r)
+            return [self.cache[u.tobytes()] for u in us]
+
+    def fit_from(u0):
+        r0 = _signals(u0) - _signals(truth)
+        c = Candidate("ballast_void", 3)
+        start = Evaluated(c, kind_of(c).from_unit(u0), SimpleNamespace(chi2=float(r0 @ r0), objective=float(np.sqrt(r0 @ r0)),
+                                                                       r=r0), 6, "fitted")
+        fitter = _Ends(pool=None, target=None, raw={}, start=start, reference=None)
+        return start, fitter.fit(start, slice(1, 2), selection.FINE_MAX_NFEV)
+
+    start, fitted = fit_from(np.array([0.3, 0.3, 0.3, 0.3, 0.7, 0.7]))
+    assert abs(start.cmp.chi2 - 0.5) < 1e-12
+    assert fitted.cmp.chi2 < 1e-6, fitted.cmp.chi2                 # the hanging ends were closed
+    _, fitted = fit_from(np.array([0.2, 0.3, 0.3, 0.3, 0.7, 0.7]))
+    u = kind_of(fitted.candidate).to_unit(fitted.values)
+    assert abs(u[0] - 0.3) < 0.02 and fitted.cmp.chi2 < 1e-4, (u, fitted.cmp.chi2)

@@ -15,7 +15,8 @@ next (forward selection, :mod:`orchestrator.inverse.diagnose`) — and a list of
    a void first as a wedge, :func:`cause_stages`, started from its screened profile (uniform gap or wedge)
    or a one-sided wedge, whichever fits better, and from the next of them when the fit cannot leave
    that start: a hanging sleeper has no gradient; when no start improves on the screened point, once
-   more from the uniform gap at half its peak, which touches the bed), all parameters of the best and of
+   more from the uniform gap at half its peak, which touches the bed; the six gaps once more with
+   those that never touch the bed closed, when that fits better), all parameters of the best and of
    up to :data:`FIT` - 1 runners-up whose J is within a factor :data:`FIT_RATIO` of the best's; the candidates' fits of a stage run side by side (:func:`side_by_side`, same results as one
    after another);
 5. :func:`_rank`: the fitted and confirmed candidates by their BIC on the effective
@@ -162,7 +163,8 @@ class CauseFitter:
         the uniform gap (diagnose.hypothesis_gains, its nuisance refit included) is not monotone
         (1.78 and 1.4 mm: 0.0205, the plateau; 1.2 mm 0.0224, 0.8 mm 0.0183), the wedges to 1.78 mm
         0.0256 and 0.0329; the named void stayed on the plateau (gain 70.9 % against the truth's
-        81.5 %) and, with this start, reached 80.4 %.
+        81.5 %) and, with this start, reached 80.4 %. The six-gap stage ends the same way for single
+        points: :meth:`_closed_hanging`.
         """
         from orchestrator.inverse.fitting import fit_unit_cube
 
@@ -183,12 +185,47 @@ class CauseFitter:
             if n == 2 and self.best_objective() >= start.cmp.objective:
                 # no start improved on the screened point: a hanging sleeper's plateau (flat J)
                 fit_unit_cube(batch, np.full(2, 0.5 * u_best.max()), max_nfev=max_nfev, spare=spare)
+            if n > 2 and any(cm is not None for cm in self.cache.values()):
+                closed = self._closed_hanging(self.best())   # a hanging point's plateau, gap by gap
+                if closed is not None:
+                    fit_unit_cube(batch, closed, max_nfev=max_nfev, spare=spare)
             if any(cm is not None for cm in self.cache.values()):
                 u_best = self.best()
         best = self.cache.get(u_best.tobytes())
         if best is None or best.objective > start.cmp.objective:   # the fit never did better than its start
             return Evaluated(start.candidate, start.values, start.cmp, k, "fitted")
         return Evaluated(start.candidate, kind.from_unit(u_best), best, k, "fitted")
+
+    def _closed_hanging(self, u: np.ndarray) -> np.ndarray | None:
+        """``u`` with its hanging gaps closed, when that fits better than ``u``; else None.
+
+        A gap point that never touches the bed during the passage does not enter the run: J does
+        not change with its gap (the forward difference of :func:`~orchestrator.inverse.fitting.forward_jacobian`
+        is exactly zero), so no fit can move it, and any gap above the sleeper's deflection there
+        gives the same J. Closing it (gap 0: the point bears) is the one change that can tell; a
+        fit of the six gaps starts from there when it lowers J. Measured (field-like case
+        void_off_sensor 7303, a void at 24 whose last two of six points bear, J along hand-given
+        profiles with diagnose.hypothesis_gains): the fit stopped at 1.67 and 2.01 mm there, J
+        0.042 (gain 59.1 % against the truth's 80.1 %); those two closed, 0.026; the truth 0.021;
+        along the straight line from the fit to the truth J stays at 0.043-0.044 until the two gaps
+        come below ~0.4 mm. Costs the Jacobian's runs at ``u`` not yet made (none when the fit ended
+        on an accepted step) and one run.
+        """
+        from orchestrator.inverse.fitting import jacobian_points
+
+        here = self.cache.get(u.tobytes())
+        if here is None:
+            return None
+        steps = [q for q, _ in jacobian_points(u)]
+        self.runs([q for q in steps if q.tobytes() not in self.cache])
+        flat = [i for i, q in enumerate(steps) if u[i] > 0.0 and self.cache.get(q.tobytes()) is not None
+                and self.cache[q.tobytes()].objective == here.objective]
+        if not flat:
+            return None
+        closed = u.copy()
+        closed[flat] = 0.0
+        got = self.runs([closed])[0]
+        return closed if got is not None and got.objective < here.objective else None
 
     def _wedge_starts(self, u: np.ndarray, to_u) -> list[np.ndarray]:
         """The wedge's starts, best first: the current ends and the two one-sided wedges to the same peak.
