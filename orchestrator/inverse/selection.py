@@ -185,11 +185,10 @@ class CauseFitter:
             if n == 2 and self.best_objective() >= start.cmp.objective:
                 # no start improved on the screened point: a hanging sleeper's plateau (flat J)
                 fit_unit_cube(batch, np.full(2, 0.5 * u_best.max()), max_nfev=max_nfev, spare=spare)
-            if n > 2 and any(cm is not None for cm in self.cache.values()):
-                closed = self._closed_hanging(self.best())   # a hanging point's plateau, gap by gap
+            if any(cm is not None for cm in self.cache.values()):
+                closed = self._closed_hanging(self.best()) if n > 2 else None   # a hanging point's plateau
                 if closed is not None:
                     fit_unit_cube(batch, closed, max_nfev=max_nfev, spare=spare)
-            if any(cm is not None for cm in self.cache.values()):
                 u_best = self.best()
         best = self.cache.get(u_best.tobytes())
         if best is None or best.objective > start.cmp.objective:   # the fit never did better than its start
