@@ -53,22 +53,22 @@ def timed(sc, backend, fmu_dir=None):
 def solve_costs(sc, repeat=2000):
     """us per solve with SuperLU (numpy path) and LDL^T (compiled path), per product with K."""
     from track.dynamics import TrackIntegrator
-    from track.kernel import LDLFactor, _coo_matvec_sub, flat_entries, ldl_solve, prune
+    from track.kernel import LDLFactor, _csr_matvec_sub, compressed_rows, ldl_solve, prune
     from track.model import build_track
 
     model = build_track(sc.track)
     integ = TrackIntegrator(model, sc.simulation.step, np.zeros(model.n))
     f = LDLFactor(prune(integ.step_matrix))
     K = prune(integ._Kt)
-    Kflat = flat_entries(K)
+    Kflat = compressed_rows(K)
     b, x, w, y = np.random.default_rng(0).standard_normal(model.n), np.empty(model.n), np.empty(model.n), \
         np.zeros(model.n)
-    ldl_solve(f.perm, f.Ls, f.Ld, f.Lx, f.d, b, x, w)
+    ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, b, x, w)
     out = {}
     for name, fn in (("SuperLU solve", lambda: integ._lu.solve(b)),
-                     ("LDL^T solve (compiled)", lambda: ldl_solve(f.perm, f.Ls, f.Ld, f.Lx, f.d, b, x, w)),
+                     ("LDL^T solve (compiled)", lambda: ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, b, x, w)),
                      ("K product, scipy (unpruned)", lambda: integ._Kt @ b),
-                     ("K product, compiled (pruned, flat)", lambda: _coo_matvec_sub(*Kflat, b, y))):
+                     ("K product, compiled (pruned, by rows)", lambda: _csr_matvec_sub(*Kflat, b, y))):
         fn()
         t0 = time.perf_counter()
         for _ in range(repeat):
@@ -116,7 +116,7 @@ def stage_costs(sc, repeat=1000):
 
     def call(ent):
         return K.contact_step(cc.par, cc.cnt, it.q, it.v, it.a, it.F, it.Fc, tc.model.f_gravity,
-                              *cc._K, *cc._C, *cc._bal, sh.ldl_Zb, sh.ldl_have, f.perm, f.Ls, f.Ld, f.Lx, f.d,
+                              *cc._K, *cc._C, *cc._bal, sh.ldl_Zb, sh.ldl_have, f.perm, f.Lp, f.Li, f.Lx, f.d,
                               xs, zw, cc.wside, ts, etab, ec, es, ent, cc.T, cc.gd, cc.nr, cc.R, cc.Ze, cc.E, cc.fresh,
                               new[0], new[1], new[2], new[3], Fc1, out, cc.W, cc.surf, cc.wts, cc.work, cc.iwork,
                               cc.yw, *cc._contact_tables, cc.chw)
@@ -134,7 +134,7 @@ def stage_costs(sc, repeat=1000):
         "predictor (with K, C products)": _best_us(lambda: K._predict(
             h, par[K.P_ALPHA], par[K.P_BETA], par[K.P_GAMMA], par[K.P_BETA_S], it.q, it.v, it.a, it.F,
             tc.model.f_gravity, *cc._K, *cc._C, qp, vp, sw, y, rhs), repeat),
-        "LDL^T solve": _best_us(lambda: K.ldl_solve(f.perm, f.Ls, f.Ld, f.Lx, f.d, rhs, acc_lin, unit), repeat),
+        "LDL^T solve": _best_us(lambda: K.ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, rhs, acc_lin, unit), repeat),
         "corrector (4 wheels x 4 rows)": _best_us(lambda: K._corrector(
             a1, bh2, gh, qp, vp, acc_lin, Fn, it.Fc, cc.W, cc.Ze, new[2], new[0], new[1]), repeat),
     }

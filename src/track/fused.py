@@ -45,8 +45,8 @@ from .kernel import (
 
 DONE, DIVERGED = 10, 11   # statuses of gauss_seidel_steps beyond the kernel's (OK is never returned)
 # contact_step's arguments without the per-step slots (the state, the wheels, the outputs), in its order
-FIXED_PARAMETERS = ("par", "cnt", "fgrav", "Ks", "Kd", "Kx", "Cs", "Cd", "Cx", "D", "bk", "bc", "bgap", "Zb",
-                    "have", "perm", "Ls", "Ld", "Lx", "dd", "wside", "ts", "etab", "ec", "es", "ent", "T", "gd",
+FIXED_PARAMETERS = ("par", "cnt", "fgrav", "Kp", "Ki", "Kx", "Cp", "Ci", "Cx", "D", "bk", "bc", "bgap", "Zb",
+                    "have", "perm", "Lp", "Li", "Lx", "dd", "wside", "ts", "etab", "ec", "es", "ent", "T", "gd",
                     "nr", "R", "Ze", "E", "fresh", "W", "surf", "wts", "work", "iwork", "yw", "tg", "tz", "tc",
                     "chw")
 _SLOT_NAMES = ("q0", "v0", "acc0", "F0", "Fc0", "x", "zw", "q1", "v1", "acc1", "F1", "Fc1", "out")

@@ -38,17 +38,20 @@ pivoting on the symmetric permutation ``P`` of a minimum-degree ordering of
 against 100k in the LU with the MMD(A^T A) ordering the numpy path uses
 (benchmarks/bench_step.py measures both).
 
-Flat loops. A column of L holds ~10 entries, a row of K ~7: loops over them end
-after a few iterations each, and their mispredicted exits (one per row or column)
-cost more than the arithmetic. So every sparse loop of the step is one flat loop
-over entries ``w[dst[k]] -= val[k] * x[src[k]]``: the products with K and C
-column by column (the targets within a column are distinct), the forward sweep of
-``L y = b`` column by column (``y_j`` is final when column j's entries come: all
-its updates come from columns < j) and the backward sweep of ``L^T z = y`` over the
-same entries from the last (``z_j`` is final when column j's entries have come: they
-follow those of every column > j; :func:`ldl_solve`). Measured on the 64-sleeper panel's
-matrices, old and new loops in one script: solve 77 -> 59 us, K product 30 -> 20 us
-(benchmarks/RESULTS.md, 2026-11-25).
+Sparse loops. Every sparse loop of the step runs over compressed rows or columns with
+``uint32`` indices: the products with K and C row by row (``out_i -= sum_k val_k x_{col_k}``,
+one accumulator per row), the forward sweep of ``L y = b`` column by column (``y_j`` is final
+when column j comes: all its updates come from columns < j) and the backward sweep of
+``L^T z = y`` column by column from the last, as a dot product of column j with the final
+``z_i``, i > j (:func:`ldl_solve`). Each output gets the same operations in the same order as
+in the flat loops over entries (``w[dst[k]] -= val[k] * x[src[k]]``, by columns) these replaced,
+so every number is the same to the last bit. Why unsigned: numba wraps a negative index around
+(``x[-1]`` is the last element), so every access through a signed index carries a test and a
+select; an unsigned index has none. Measured on the 64-sleeper panel's matrices in one script,
+old and new loops alternating (2026-11-27, benchmarks/RESULTS.md "Session 24"): solve 80 -> 55 us,
+K product 17 -> 12 us; the same compressed loops with int64 indices were no faster than the flat
+ones (the flat loops had been chosen on 2026-11-25 over compressed ones with int64 indices:
+solve 77 -> 59 us, K product 30 -> 20 us).
 
 Round-off entries. The Craig–Bampton products ``T^T K T`` leave entries that are
 zero in exact arithmetic (the constraint modes are K-orthogonal to the
@@ -241,20 +244,28 @@ def drop_cancelled(D: sp.spmatrix, S: sp.spmatrix, rtol: float = PRUNE_RTOL) -> 
     return out
 
 
+INDEX = np.uint32   # index type of the compressed sparse loops (module docstring, "Sparse loops")
+
+
+def _indices(a, what: str) -> np.ndarray:
+    """``a`` as :data:`INDEX` (contiguous); ValueError when a value does not fit."""
+    a = np.asarray(a)
+    if a.size and (a.min() < 0 or a.max() > np.iinfo(INDEX).max):
+        raise ValueError(f"{what}: indices outside 0..{np.iinfo(INDEX).max} ({INDEX.__name__})")
+    return np.ascontiguousarray(a, dtype=INDEX)
+
+
 class LDLFactor:
     """``P A P^T = L D L^T`` of a symmetric positive definite sparse matrix (module doc).
 
     Attributes
     ----------
-    perm : ndarray of int64, shape (n,)
+    perm : ndarray of uint32, shape (n,)
         ``(P x)[i] = x[perm[i]]``.
-    Ls, Ld, Lx : ndarray, shape (nnz,)
-        The strictly lower part of the unit ``L`` by columns (module docstring, "Flat
-        loops"): entry ``k`` is ``L[Ld[k], Ls[k]] = Lx[k]``. The forward sweep of
-        :func:`ldl_solve` does ``w[Ld[k]] -= Lx[k] * w[Ls[k]]`` for k upwards, the
-        backward one ``w[Ls[k]] -= Lx[k] * w[Ld[k]]`` for k downwards: one copy of the
-        factor serves both (until 2026-11-26 a second copy by rows held the backward
-        sweep; it did the same operations in the same order, see :func:`ldl_solve`).
+    Lp, Li, Lx : ndarray of uint32 (n + 1,), uint32 (nnz,), float64 (nnz,)
+        The strictly lower part of the unit ``L`` by compressed columns, rows ascending within a
+        column: column j holds ``L[Li[k], j] = Lx[k]`` for ``Lp[j] <= k < Lp[j + 1]``. One copy
+        serves both sweeps of :func:`ldl_solve` (module docstring, "Sparse loops").
     d : ndarray, shape (n,)
         Diagonal of ``D``.
     """
@@ -273,9 +284,9 @@ class LDLFactor:
         Lc = sp.tril(lu.L, -1).tocsc()
         Lc.sort_indices()
         self.n = n
-        self.perm = p.astype(np.int64)
-        self.Ls = np.repeat(np.arange(n, dtype=np.int64), np.diff(Lc.indptr))   # source: the column
-        self.Ld = Lc.indices.astype(np.int64)                                   # destination: the row
+        self.perm = _indices(p, "LDL^T permutation")
+        self.Lp = _indices(Lc.indptr, "LDL^T column pointers")
+        self.Li = _indices(Lc.indices, "LDL^T row indices")
         self.Lx = np.ascontiguousarray(Lc.data, dtype=float)
         self.d = np.ascontiguousarray(d, dtype=float)
         self.work = np.empty(n)
@@ -290,10 +301,10 @@ class LDLFactor:
         b = np.asarray(b, dtype=float)
         if b.ndim == 1:
             out = np.empty(self.n)
-            ldl_solve(self.perm, self.Ls, self.Ld, self.Lx, self.d, b, out, self.work)
+            ldl_solve(self.perm, self.Lp, self.Li, self.Lx, self.d, b, out, self.work)
             return out
         out = np.empty_like(b, dtype=float)
-        ldl_solve_many(self.perm, self.Ls, self.Ld, self.Lx, self.d, np.ascontiguousarray(b), out,
+        ldl_solve_many(self.perm, self.Lp, self.Li, self.Lx, self.d, np.ascontiguousarray(b), out,
                        np.empty(b.shape))
         return out
 
@@ -326,31 +337,41 @@ def fill_ordering(A: sp.csc_matrix) -> np.ndarray:
 
 
 @_njit
-def ldl_solve(perm, Ls, Ld, Lx, d, b, x, work):
+def ldl_solve(perm, Lp, Li, Lx, d, b, x, work):
     """x = A^{-1} b with ``P A P^T = L D L^T`` (see :class:`LDLFactor`); ``work`` of shape (n,).
 
-    The backward sweep ``L^T z = y`` runs over L's entries by columns from the last
-    entry: ``z_j`` gets its updates from column j's entries ``(i, j)``, ``i > j``, after
-    every entry of the columns ``> j`` (so each ``z_i`` it reads is final), in the order
-    of decreasing ``i`` — the order in which a sweep by rows from the last row gives them,
-    so the result is the same to the last bit as with a second, row-ordered copy of L,
-    which this replaced (2026-11-26: half the factor's memory, 75 -> 63 us at 2763 dofs).
+    Forward sweep ``L y = P b`` by columns: ``y_j`` is final when column j comes, and its
+    entries update rows > j. Backward sweep ``L^T z = D^-1 y`` by columns from the last:
+    ``z_j = y_j - sum_i L_ij z_i`` over column j's entries in the order of decreasing ``i``
+    (each ``z_i``, i > j, final), one accumulator — the operations and order of the flat
+    loop over entries that this replaced (2026-11-27), so the same result to the last bit.
     """
     n = d.size
     for i in range(n):
         work[i] = b[perm[i]]
-    for k in range(Lx.size):                 # L y = P b, by columns
-        work[Ld[k]] -= Lx[k] * work[Ls[k]]
+    for j in range(n):                       # L y = P b
+        yj = work[j]
+        for k in range(Lp[j], Lp[j + 1]):
+            work[Li[k]] -= Lx[k] * yj
     for j in range(n):
         work[j] /= d[j]
-    for k in range(Lx.size - 1, -1, -1):     # L^T z = D^-1 y, by columns from the last entry
-        work[Ls[k]] -= Lx[k] * work[Ld[k]]
+    for j in range(n - 1, -1, -1):           # L^T z = D^-1 y, two accumulators
+        s = work[j]
+        t = 0.0
+        a, e = Lp[j], Lp[j + 1]
+        m = a + ((e - a) & ~1)
+        for k in range(a, m, 2):
+            s -= Lx[k] * work[Li[k]]
+            t -= Lx[k + 1] * work[Li[k + 1]]
+        if m < e:
+            s -= Lx[m] * work[Li[m]]
+        work[j] = s + t
     for i in range(n):
         x[perm[i]] = work[i]
 
 
 @_njit
-def ldl_solve_many(perm, Ls, Ld, Lx, d, B, X, work):
+def ldl_solve_many(perm, Lp, Li, Lx, d, B, X, work):
     """X = A^{-1} B for k columns at once (B, X, work of shape (n, k), C order): the sweeps of
     :func:`ldl_solve` reading the factor once for all columns (the same operations per column).
 
@@ -361,35 +382,40 @@ def ldl_solve_many(perm, Ls, Ld, Lx, d, B, X, work):
     for i in range(n):
         for c in range(k):
             work[i, c] = B[perm[i], c]
-    for p in range(Lx.size):                 # L Y = P B, by columns
-        s, t, l = Ls[p], Ld[p], Lx[p]
-        for c in range(k):
-            work[t, c] -= l * work[s, c]
+    for j in range(n):                       # L Y = P B
+        for p in range(Lp[j], Lp[j + 1]):
+            t, l = Li[p], Lx[p]
+            for c in range(k):
+                work[t, c] -= l * work[j, c]
     for j in range(n):
         for c in range(k):
             work[j, c] /= d[j]
-    for p in range(Lx.size - 1, -1, -1):     # L^T Z = D^-1 Y, by columns from the last entry
-        s, t, l = Ls[p], Ld[p], Lx[p]
-        for c in range(k):
-            work[s, c] -= l * work[t, c]
+    for j in range(n - 1, -1, -1):           # L^T Z = D^-1 Y
+        for p in range(Lp[j + 1] - 1, Lp[j] - 1, -1):
+            t, l = Li[p], Lx[p]
+            for c in range(k):
+                work[j, c] -= l * work[t, c]
     for i in range(n):
         for c in range(k):
             X[perm[i], c] = work[i, c]
 
 
 @_njit
-def _coo_matvec_sub(src, dst, val, x, out):
-    """out -= X @ x for X as flat entries ``X[dst[k], src[k]] = val[k]`` (module docstring, "Flat loops")."""
-    for k in range(val.size):
-        out[dst[k]] -= val[k] * x[src[k]]
+def _csr_matvec_sub(Xp, Xi, Xx, x, out):
+    """out -= X @ x for X by compressed rows (:func:`compressed_rows`), columns ascending in a row."""
+    for i in range(Xp.size - 1):
+        s = out[i]
+        for k in range(Xp[i], Xp[i + 1]):
+            s -= Xx[k] * x[Xi[k]]
+        out[i] = s
 
 
-def flat_entries(X: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(src, dst, val)`` of X by columns, for :func:`_coo_matvec_sub` (int64, int64, float64)."""
-    X = sp.csc_matrix(X)
+def compressed_rows(X: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(indptr, indices, data)`` of X by rows, columns ascending: uint32, uint32, float64 (:func:`_csr_matvec_sub`)."""
+    X = sp.csr_matrix(X)
     X.sort_indices()
-    src = np.repeat(np.arange(X.shape[1], dtype=np.int64), np.diff(X.indptr))
-    return src, X.indices.astype(np.int64), np.ascontiguousarray(X.data, dtype=float)
+    return (_indices(X.indptr, "row pointers"), _indices(X.indices, "column indices"),
+            np.ascontiguousarray(X.data, dtype=float))
 
 
 @_njit
@@ -408,12 +434,12 @@ def _correction(k, c, gap, u, v):
 
 
 @_njit
-def _ballast_row(j, D, Zb, have, perm, Ls, Ld, Lx, d, e, work, cnt):
+def _ballast_row(j, D, Zb, have, perm, Lp, Li, Lx, d, e, work, cnt):
     """Make row j of ``Zb`` (``A^{-1} e_{D[j]}``) available; counts the solve."""
     if have[j] == 0:
         e[:] = 0.0
         e[D[j]] = 1.0
-        ldl_solve(perm, Ls, Ld, Lx, d, e, Zb[j], work)
+        ldl_solve(perm, Lp, Li, Lx, d, e, Zb[j], work)
         have[j] = 1
         cnt[C_SOLVES] += 1
 
@@ -471,7 +497,7 @@ def _locate_wheels(par, x, yw, wside, ts, etab, ec, es, ent, W, surf, tg, tz, tc
 
 
 @_njit
-def _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Ks, Kd, Kx, Cs, Cd, Cx, qp, vp, sw, y, rhs):
+def _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, Cx, qp, vp, sw, y, rhs):
     """Newmark predictors and the linear right-hand side of the step.
 
     Fills ``qp``, ``vp`` (predicted displacement [m] and velocity [m/s]) and
@@ -489,8 +515,8 @@ def _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Ks, Kd, Kx, Cs, Cd, C
         sw[i] = a1 * vp[i] - a_ * v0[i]                     # damping argument
         y[i] = a1 * qp[i] - a_ * q0[i] + beta_s * sw[i]     # stiffness argument (K part of C folded in)
         rhs[i] = a1 * fgrav[i] - a_ * F0[i]
-    _coo_matvec_sub(Ks, Kd, Kx, y, rhs)
-    _coo_matvec_sub(Cs, Cd, Cx, sw, rhs)
+    _csr_matvec_sub(Kp, Ki, Kx, y, rhs)
+    _csr_matvec_sub(Cp, Ci, Cx, sw, rhs)
 
 
 @_njit
@@ -668,7 +694,7 @@ def _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn,
 
 
 @_njit
-def _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Ls, Ld, Lx, dd, unit, work,
+def _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Lp, Li, Lx, dd, unit, work,
                             corr, newc, acc_lin, cnt):
     """A bushing opened or closed: correct the linear solution ``acc_lin`` through the ballast
     influence rows (solved on first use) instead of a new solve; ``corr = newc``."""
@@ -677,7 +703,7 @@ def _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Ls, Ld, Lx, 
         dD = newc[c] - corr[c]
         if abs(dD) > ftol0:
             j = cidx[c]
-            _ballast_row(j, D, Zb, have, perm, Ls, Ld, Lx, dd, unit, work, cnt)
+            _ballast_row(j, D, Zb, have, perm, Lp, Li, Lx, dd, unit, work, cnt)
             f = a1 * dD
             for i2 in range(n):
                 acc_lin[i2] += f * Zb[j, i2]
@@ -759,7 +785,7 @@ def _workspace(work, n, m, nbal):
 @_njit
 def _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts, gd, nr, G, res, zw,
             surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap, qp, vp, W, Ze, corr, newc, Zb, have,
-            perm, Ls, Ld, Lx, dd, unit, y):
+            perm, Lp, Li, Lx, dd, unit, y):
     """The modified-Newton passes of a step: contact Newton, then the ballast bushings' change;
     repeated (with the bushings' influence rows) while a bushing changes state.
 
@@ -776,16 +802,16 @@ def _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, ac
                                  corr, newc)
         if change <= ftol:
             return OK, change, it
-        _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Ls, Ld, Lx, dd, unit, y,
+        _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Lp, Li, Lx, dd, unit, y,
                                 corr, newc, acc_lin, cnt)
     return PASSES_FAILED, change, it
 
 
 @_njit
 def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
-                 Ks, Kd, Kx, Cs, Cd, Cx,
+                 Kp, Ki, Kx, Cp, Ci, Cx,
                  D, bk, bc, bgap, Zb, have,
-                 perm, Ls, Ld, Lx, dd,
+                 perm, Lp, Li, Lx, dd,
                  x, zw, wside, ts, etab, ec, es, ent,
                  T, gd, nr, R, Ze, E, fresh,
                  q1, v1, acc1, F1, Fc1, out, W, surf, wts, work, iwork,
@@ -807,12 +833,12 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     Fc0 : float64[m]
         Contact forces of the last step [N] (the first guess).
     fgrav : float64[n]
-    Ks, Kd, Kx / Cs, Cd, Cx : flat entries (:func:`flat_entries`) of the stiffness (with the linear ballast) and of
+    Kp, Ki, Kx / Cp, Ci, Cx : compressed rows (:func:`compressed_rows`) of the stiffness (with the linear ballast) and of
         ``C_t - beta_s K_t`` (the damping not proportional to K).
     D, bk, bc, bgap : ballast dofs, stiffness [N/m], damping [N s/m], gaps [m].
     Zb : float64[nb, n], have : uint8[nb]
         Ballast influence rows ``A^{-1} e_D`` (filled on demand).
-    perm, Ls, Ld, Lx, dd : the LDL^T factor of the step matrix (:class:`LDLFactor`).
+    perm, Lp, Li, Lx, dd : the LDL^T factor of the step matrix (:class:`LDLFactor`).
     x, zw : float64[m]     wheel track coordinates and vertical positions at the step's end [m].
     wside : int64[m]       side of each wheel (0 left, 1 right).
     ts, etab, ec, es : int64[3], float64[E, 3], float64[E, 4, 4], int64[E]
@@ -855,11 +881,11 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     qp, vp, rhs, y, acc_lin, sw, unit, Fn, wlin, wpred, res, cpl, G, corr, newc = _workspace(work, n, m, nbal)
     cidx = iwork
 
-    _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Ks, Kd, Kx, Cs, Cd, Cx, qp, vp, sw, y, rhs)
+    _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, Cx, qp, vp, sw, y, rhs)
     nc = _ballast_candidates(h, safety, floor, q0, v0, acc0, D, bgap, cidx)
     _ballast_first_guess(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc0, corr, rhs)
     fmax = _wheel_loads(a1, W, T, gd, nr, Fc0, Fn, wts, rhs)
-    ldl_solve(perm, Ls, Ld, Lx, dd, rhs, acc_lin, unit)
+    ldl_solve(perm, Lp, Li, Lx, dd, rhs, acc_lin, unit)
     cnt[C_SOLVES] += 1
     _coupling_blocks(T, gd, nr, Ze, fresh, E)
     _contact_coupling(a1, bh2, W, R, gd, nr, wts, E, qp, G, res, wpred)
@@ -869,7 +895,7 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     # modified-Newton passes: they repeat only while a ballast bushing changes state
     status, change, it = _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts,
                                  gd, nr, G, res, zw, surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap,
-                                 qp, vp, W, Ze, corr, newc, Zb, have, perm, Ls, Ld, Lx, dd, unit, y)
+                                 qp, vp, W, Ze, corr, newc, Zb, have, perm, Lp, Li, Lx, dd, unit, y)
     if status != OK:
         return status, change
 
@@ -1059,8 +1085,8 @@ class CompiledContacts:
         Kt, Ct = integ._Kt, integ._Ct
         K = prune(Kt)
         Cr = drop_cancelled(Ct - beta_s * Kt, abs(Ct) + beta_s * abs(Kt))
-        self._K = flat_entries(K)
-        self._C = flat_entries(Cr)
+        self._K = compressed_rows(K)
+        self._C = compressed_rows(Cr)
         self._bal = (bal.dof.astype(np.int64), bal.k.astype(float), bal.c.astype(float), bal.gap.astype(float))
         self.par = par = np.zeros(N_PAR)
         par[[P_H, P_ALPHA, P_BETA, P_GAMMA, P_SAFETY, P_FLOOR, P_CTOL, P_CREL, P_FTOL, P_FREL, P_MAXPASS,
@@ -1098,7 +1124,7 @@ class CompiledContacts:
         f, sh = self.f, self._sh
         args = [self.par, self.cnt, None, None, None, None, None, self.model.f_gravity,
                 *self._K, *self._C, *self._bal, sh.ldl_Zb, sh.ldl_have,
-                f.perm, f.Ls, f.Ld, f.Lx, f.d,
+                f.perm, f.Lp, f.Li, f.Lx, f.d,
                 None, None, self.wside, *self._tables, self.ent,
                 self.T, self.gd, self.nr, self.R, self.Ze, self.E, self.fresh,
                 None, None, None, None, None, None, self.W, self.surf, self.wts, self.work, self.iwork,

@@ -19,10 +19,10 @@ from .kernel import _njit
 from .unit_step import unit_sensors, unit_step
 
 # kind of each array of unit_step's arguments after t, h (flattened: P's 43 arrays, trk's 9, the record's 10):
-# f/i/u float64/int64/uint8, then the number of dimensions
+# f/i/w/u float64/int64/uint32/uint8, then the number of dimensions
 SPEC = ("f1", "i1", "f1",
-        "f1", "i1", "f1", "i1", "i1", "f1", "i1", "i1", "f1", "i1", "f1", "f1", "f1", "f2", "u1", "i1", "i1",
-        "i1", "f1", "f1", "i1", "i1", "f2", "f3", "i1", "i2", "f3", "i2", "i1", "f3", "f3", "f4", "u1", "f2",
+        "f1", "i1", "f1", "w1", "w1", "f1", "w1", "w1", "f1", "i1", "f1", "f1", "f1", "f2", "u1", "w1", "w1",
+        "w1", "f1", "f1", "i1", "i1", "f2", "f3", "i1", "i2", "f3", "i2", "i1", "f3", "f3", "f4", "u1", "f2",
         "f2", "f2", "f1", "i1", "f1", "f2", "f4", "f4", "f2",
         "f2", "f2", "f2", "f2", "f2", "f2",
         "f1", "f1", "f1", "f1", "f1", "f2", "f1", "f1", "f1",
@@ -31,7 +31,7 @@ SPEC = ("f1", "i1", "f1",
         "i1", "f1",
         "i1", "i1", "i1", "f1", "f1", "f1", "f1", "f2", "f1")   # the sensors' (unit_step.sensor_read)
 SLOT = 5   # int64 per array in ctx: address, then 4 dimensions (1 where unused)
-_KINDS = {"f": np.float64, "i": np.int64, "u": np.uint8}
+_KINDS = {"f": np.float64, "i": np.int64, "w": np.uint32, "u": np.uint8}
 
 
 def flatten(args: tuple) -> list:
@@ -101,6 +101,11 @@ def _i2(ctx, k):
 
 
 @_njit
+def _w1(ctx, k):
+    return carray(_pointer(ctx[SLOT * k]), (ctx[SLOT * k + 1],), np.uint32)
+
+
+@_njit
 def _u1(ctx, k):
     return carray(_pointer(ctx[SLOT * k]), (ctx[SLOT * k + 1],), np.uint8)
 
@@ -110,9 +115,9 @@ def unit_step_c(ctx_address, t, h):
     """:func:`~track.unit_step.unit_step` on the arrays of ``ctx`` (:func:`pack`)."""
     ctx = carray(ctx_address, (SLOT * len(SPEC),), np.int64)
     inp, ist, fst = _f1(ctx, 0), _i1(ctx, 1), _f1(ctx, 2)
-    P = (_f1(ctx, 3), _i1(ctx, 4), _f1(ctx, 5), _i1(ctx, 6), _i1(ctx, 7), _f1(ctx, 8), _i1(ctx, 9),
-         _i1(ctx, 10), _f1(ctx, 11), _i1(ctx, 12), _f1(ctx, 13), _f1(ctx, 14), _f1(ctx, 15), _f2(ctx, 16),
-         _u1(ctx, 17), _i1(ctx, 18), _i1(ctx, 19), _i1(ctx, 20), _f1(ctx, 21), _f1(ctx, 22), _i1(ctx, 23),
+    P = (_f1(ctx, 3), _i1(ctx, 4), _f1(ctx, 5), _w1(ctx, 6), _w1(ctx, 7), _f1(ctx, 8), _w1(ctx, 9),
+         _w1(ctx, 10), _f1(ctx, 11), _i1(ctx, 12), _f1(ctx, 13), _f1(ctx, 14), _f1(ctx, 15), _f2(ctx, 16),
+         _u1(ctx, 17), _w1(ctx, 18), _w1(ctx, 19), _w1(ctx, 20), _f1(ctx, 21), _f1(ctx, 22), _i1(ctx, 23),
          _i1(ctx, 24), _f2(ctx, 25), _f3(ctx, 26), _i1(ctx, 27), _i2(ctx, 28), _f3(ctx, 29), _i2(ctx, 30),
          _i1(ctx, 31), _f3(ctx, 32), _f3(ctx, 33), _f4(ctx, 34), _u1(ctx, 35), _f2(ctx, 36), _f2(ctx, 37),
          _f2(ctx, 38), _f1(ctx, 39), _i1(ctx, 40), _f1(ctx, 41), _f2(ctx, 42), _f4(ctx, 43), _f4(ctx, 44),
