@@ -6,13 +6,14 @@ Newton sweeps) and count the same work.
 """
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from conftest import DEFAULT_SCENARIO
 
 from orchestrator.cosim.master import run_cosim
 from orchestrator.inputs.scenario import load_scenario
 from track import dynamics
 from track.dynamics import TrackIntegrator
-from track.kernel import INFLUENCE_AHEAD, KERNEL_ENV, LDLFactor, prune
+from track.kernel import INFLUENCE_AHEAD, KERNEL_ENV, LDLFactor, _csr_matvec_sub, _indices, compressed_rows, prune
 from track.layout import build_layout
 from track.model import build_track
 from track.statics import static_equilibrium
@@ -90,16 +91,37 @@ def test_ldl_solve_is_exact_to_round_off():
     x_ref = integ._lu.solve(b)
     assert np.abs(x - x_ref).max() <= 1e-10 * np.abs(x_ref).max()   # cond(A) ~ 1e3 x round-off
     assert f.nnz < integ._lu.L.nnz + integ._lu.U.nnz   # the point of it: less fill than the LU
-    # several columns at once (influence rows): the same operations per column as the one-column
-    # sweeps, so equal to round-off of the last digit (1e-14 of the largest entry allows for it)
+    # several columns at once (influence rows) against one at a time: the same sweeps, but the
+    # one-column backward sweep sums in two accumulators (track.kernel.ldl_solve), the many-column
+    # one in one, so they differ by round-off (1e-14 of the largest entry allows for it)
     B = rng.standard_normal((model.n, 4))
     X = f.solve(B)
     for c in range(4):
         xc = f.solve(np.ascontiguousarray(B[:, c]))
-        # the same sweeps over the same factor, one column at a time or four: round-off of a few
-        # operations per entry (observed 0 to a few ulp), far below any use of the solution
+        # round-off of a few operations per entry (a few ulp), far below any use of the solution
         assert np.abs(X[:, c] - xc).max() <= 1e-14 * np.abs(xc).max()
     assert np.abs(A @ X - B).max() / (norm_A * np.abs(X).max()) < 1e-13
+
+
+def test_compressed_row_product_against_scipy():
+    """``_csr_matvec_sub`` (the step's K and C products) against scipy's own sparse product, on a
+    random matrix with empty rows and columns; and the uint32 index check.
+
+    Tolerance 1e-14 of the largest |out| entry: both sum at most a few terms per row in float64
+    (a few ulp of round-off apart when their summation orders differ)."""
+    rng = np.random.default_rng(3)
+    X = sp.random(300, 300, density=0.02, random_state=4, format="lil")
+    X[17, :] = 0.0                        # an empty row
+    X = sp.csr_matrix(X)
+    x = rng.standard_normal(300)
+    out0 = rng.standard_normal(300)
+    out = out0.copy()
+    _csr_matvec_sub(*compressed_rows(X), x, out)
+    ref = out0 - X @ x
+    assert np.abs(out - ref).max() <= 1e-14 * np.abs(ref).max()
+    assert out[17] == out0[17]
+    with pytest.raises(ValueError, match="uint32"):
+        _indices(np.array([0, -1]), "test indices")
 
 
 def test_kernel_wheel_lookup_matches_model_points():

@@ -40,18 +40,21 @@ against 100k in the LU with the MMD(A^T A) ordering the numpy path uses
 
 Sparse loops. Every sparse loop of the step runs over compressed rows or columns with
 ``uint32`` indices: the products with K and C row by row (``out_i -= sum_k val_k x_{col_k}``,
-one accumulator per row), the forward sweep of ``L y = b`` column by column (``y_j`` is final
-when column j comes: all its updates come from columns < j) and the backward sweep of
-``L^T z = y`` column by column from the last, as a dot product of column j with the final
-``z_i``, i > j (:func:`ldl_solve`). Each output gets the same operations in the same order as
-in the flat loops over entries (``w[dst[k]] -= val[k] * x[src[k]]``, by columns) these replaced,
-so every number is the same to the last bit. Why unsigned: numba wraps a negative index around
-(``x[-1]`` is the last element), so every access through a signed index carries a test and a
-select; an unsigned index has none. Measured on the 64-sleeper panel's matrices in one script,
-old and new loops alternating (2026-11-27, benchmarks/RESULTS.md "Session 24"): solve 80 -> 55 us,
-K product 17 -> 12 us; the same compressed loops with int64 indices were no faster than the flat
-ones (the flat loops had been chosen on 2026-11-25 over compressed ones with int64 indices:
-solve 77 -> 59 us, K product 30 -> 20 us).
+one accumulator per row, columns ascending), the forward sweep of ``L y = b`` column by column
+(``y_j`` is final when column j comes: all its updates come from columns < j) and the backward
+sweep of ``L^T z = y`` column by column from the last, as a dot product of column j with the
+final ``z_i``, i > j (:func:`ldl_solve`). The products and the forward sweep do each output's
+operations in the order of the flat loops over entries (``w[dst[k]] -= val[k] * x[src[k]]``, by
+columns) that these replaced, so they give the same numbers to the last bit. The backward sweep
+sums each column's dot product in two accumulators (even and odd entries), which breaks the
+chain of dependent subtractions in two: a different rounding, up to 4e-13 of the peak contact
+force on the default, 64-sleeper and profile scenarios (measured against the single-accumulator
+sweep). Why unsigned: numba wraps a negative index around (``x[-1]`` is
+the last element), so every access through a signed index carries a test and a select; an
+unsigned index has none. Measured on the 64-sleeper panel's matrices in one script, loops
+alternating (2026-11-27, benchmarks/RESULTS.md "Session 24"): solve 80 -> 55 us (compressed,
+uint32) -> 46 us (two accumulators), K product 17 -> 12 us; compressed loops with int64
+indices are no faster than the flat ones (which had been chosen over them on 2026-11-25).
 
 Round-off entries. The Craig–Bampton products ``T^T K T`` leave entries that are
 zero in exact arithmetic (the constraint modes are K-orthogonal to the
@@ -342,9 +345,9 @@ def ldl_solve(perm, Lp, Li, Lx, d, b, x, work):
 
     Forward sweep ``L y = P b`` by columns: ``y_j`` is final when column j comes, and its
     entries update rows > j. Backward sweep ``L^T z = D^-1 y`` by columns from the last:
-    ``z_j = y_j - sum_i L_ij z_i`` over column j's entries in the order of decreasing ``i``
-    (each ``z_i``, i > j, final), one accumulator — the operations and order of the flat
-    loop over entries that this replaced (2026-11-27), so the same result to the last bit.
+    ``z_j = y_j - sum_i L_ij z_i`` over column j's entries (each ``z_i``, i > j, final), summed
+    in two accumulators, even and odd entries, added at the end (module docstring, "Sparse
+    loops": 55 -> 46 us on the 64-sleeper panel against one accumulator).
     """
     n = d.size
     for i in range(n):
@@ -373,7 +376,9 @@ def ldl_solve(perm, Lp, Li, Lx, d, b, x, work):
 @_njit
 def ldl_solve_many(perm, Lp, Li, Lx, d, B, X, work):
     """X = A^{-1} B for k columns at once (B, X, work of shape (n, k), C order): the sweeps of
-    :func:`ldl_solve` reading the factor once for all columns (the same operations per column).
+    :func:`ldl_solve` reading the factor once for all columns (the same operations per column,
+    whatever the other columns; the backward sweep's sums in one accumulator per column: the k
+    columns are already independent chains).
 
     For the influence columns (4 per element a wheel enters). Not used for one column: at
     k = 1 it takes twice :func:`ldl_solve`'s time (125 vs 65 us at n = 2763, measured).
