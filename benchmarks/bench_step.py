@@ -60,7 +60,7 @@ def solve_costs(sc, repeat=2000):
     integ = TrackIntegrator(model, sc.simulation.step, np.zeros(model.n))
     f = LDLFactor(prune(integ.step_matrix))
     K = prune(integ._Kt)
-    Kflat = compressed_rows(K)
+    Krows = compressed_rows(K)
     b, x, w, y = np.random.default_rng(0).standard_normal(model.n), np.empty(model.n), np.empty(model.n), \
         np.zeros(model.n)
     ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, b, x, w)
@@ -68,7 +68,7 @@ def solve_costs(sc, repeat=2000):
     for name, fn in (("SuperLU solve", lambda: integ._lu.solve(b)),
                      ("LDL^T solve (compiled)", lambda: ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, b, x, w)),
                      ("K product, scipy (unpruned)", lambda: integ._Kt @ b),
-                     ("K product, compiled (pruned, by rows)", lambda: _csr_matvec_sub(*Kflat, b, y))):
+                     ("K product, compiled (pruned, by rows)", lambda: _csr_matvec_sub(*Krows, b, y))):
         fn()
         t0 = time.perf_counter()
         for _ in range(repeat):
