@@ -94,8 +94,8 @@ def stage_costs(sc, repeat=1000):
     """us per call of the compiled step's stages, for a bogie 1 m ahead of the crossing transition.
 
     The whole step (CompiledContacts.step: Python + one kernel call), the kernel call alone,
-    the call returning at once (argument passing + wheel lookup: a wheel set to need another
-    element), and the predictor (with the K and C products), solve and corrector stages.
+    a wheel entering an element whose influence rows are solved (the kernel's own element load),
+    and the predictor (with the K and C products), solve and corrector stages.
     """
     from track import kernel as K
     from track.cosim import TrackCosim
@@ -111,32 +111,30 @@ def stage_costs(sc, repeat=1000):
     xs, zw = x + 5 * sc.vehicle.speed * h, z + tc.offset
     n, m = tc.model.n, 4
     new, Fc1, out = np.empty((4, n)), np.empty(m), np.empty((m, 4))
-    f, sh = cc.f, cc._sh
-    ts, etab, ec, es = cc._tables
+    f = cc.f
 
-    def call(ent):
-        return K.contact_step(cc.par, cc.cnt, it.q, it.v, it.a, it.F, it.Fc, tc.model.f_gravity,
-                              *cc._K, *cc._C, *cc._bal, sh.ldl_Zb, sh.ldl_have, f.perm, f.Lp, f.Li, f.Lx, f.d,
-                              xs, zw, cc.wside, ts, etab, ec, es, ent, cc.T, cc.gd, cc.nr, cc.R, cc.Ze, cc.E, cc.fresh,
-                              new[0], new[1], new[2], new[3], Fc1, out, cc.W, cc.surf, cc.wts, cc.work, cc.iwork,
-                              cc.yw, *cc._contact_tables, cc.chw)
-
-    stale = cc.ent.copy()
-    stale[0, 0] = -1
+    args = list(cc._args)
+    s0, sx, sn = K._STEP_SLOTS
+    args[s0:s0 + 5] = it.q, it.v, it.a, it.F, it.Fc
+    args[sx:sx + 2] = xs, zw
+    args[sn:sn + 6] = new[0], new[1], new[2], new[3], Fc1, out
+    k0 = int(cc.ent[0, 0])
     par, w = cc.par, cc.work
     qp, vp, rhs, y, acc_lin, sw, unit = (w[j * n:(j + 1) * n] for j in range(7))
     a1, bh2, gh = 1.0 + par[K.P_ALPHA], par[K.P_BETA] * h * h, par[K.P_GAMMA] * h
     Fn = it.Fc + 1.0
     return {
         "CompiledContacts.step": _best_us(lambda: cc.step(xs, z + tc.offset, tc.c_h), repeat),
-        "kernel call": _best_us(lambda: call(cc.ent), repeat),
-        "call + wheel lookup only": _best_us(lambda: call(stale), repeat),
+        "kernel call": _best_us(lambda: K.contact_step(*args), repeat),
+        "element entry (rows solved)": _best_us(lambda: K._load_entry(
+            0, k0, *cc._rows, f.perm, f.Lp, f.Li, f.Lx, f.d, cc.T, cc.gd, cc.nr, cc.R, cc.zrow, cc.fresh, cc.ent,
+            cc.cnt), repeat),
         "predictor (with K, C products)": _best_us(lambda: K._predict(
             h, par[K.P_ALPHA], par[K.P_BETA], par[K.P_GAMMA], par[K.P_BETA_S], it.q, it.v, it.a, it.F,
             tc.model.f_gravity, *cc._K, *cc._C, qp, vp, sw, y, rhs), repeat),
         "LDL^T solve": _best_us(lambda: K.ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, rhs, acc_lin, unit), repeat),
         "corrector (4 wheels x 4 rows)": _best_us(lambda: K._corrector(
-            a1, bh2, gh, qp, vp, acc_lin, Fn, it.Fc, cc.W, cc.Ze, new[2], new[0], new[1]), repeat),
+            a1, bh2, gh, qp, vp, acc_lin, Fn, it.Fc, cc.W, cc._rows[7], cc.zrow, new[2], new[0], new[1]), repeat),
     }
 
 

@@ -716,7 +716,6 @@ class Track(CosimSlave):
             return False
         u = self._unit
         if current and u is not None:
-            u.load_elements()
             return True
         if u is None or u.engine is not c:
             sleepers = self._model.layout.sleepers

@@ -57,7 +57,7 @@ def test_compiled_step_matches_numpy_reference(monkeypatch):
     a, b = res["compiled"], res["numpy"]
     ca, cb = a.stats.counters, b.stats.counters
     # the same decisions: every pass and Newton sweep; the same solves counted, but for the influence
-    # rows the compiled path solves ahead of the wheels (CompiledContacts.influence_rows): at most
+    # rows the compiled path solves ahead of the wheels (track.kernel._solve_rows): at most
     # INFLUENCE_AHEAD elements' new rows (2 each on a beam) past the last element of each running body
     assert (ca.passes, ca.contact_iterations) == (cb.passes, cb.contact_iterations)
     running = sum(body.kind != "sleeper" for body in a.track_model.bodies)
@@ -215,6 +215,44 @@ def test_influence_rows_are_solved_once_per_node_and_ahead_of_the_wheel(monkeypa
         assert np.abs(rows - ref).max() <= 1e-10 * np.abs(ref).max()
         assert np.array_equal(rows, cc.f.solve(E).T)
     assert np.array_equal(first[2:], second[:2])               # the shared node: the very same rows
+
+
+def test_the_kernel_loads_the_element_a_wheel_enters(monkeypatch):
+    """The element data the kernel loads itself when a wheel enters an element (track.kernel._load_entry,
+    from the tables of element_rows) are the body's own: its load rows and coordinates
+    (Body.load_rows, gdofs: exactly, they are copies), its residual flexibility (Body.residual_block,
+    exactly) and the influence rows A^{-1} r against SuperLU's solve of the unpruned step matrix
+    (1e-10 of the largest entry, as in test_influence_rows_are_solved_once_per_node_and_ahead_of_the_wheel).
+    Rows past an element's load rows are zero. Checked for two wheels on both rails, after steps
+    that crossed elements (the last loaded ones are compared)."""
+    import scipy.sparse.linalg as spla
+
+    from track.cosim import TrackCosim
+
+    monkeypatch.setattr(dynamics, "_FACTORS", {})
+    sc = load_scenario(DEFAULT_SCENARIO)
+    tc = TrackCosim(sc.track, 2, 1e5, sc.simulation.step, speed=30.0, kernel=True)   # wheels left, right
+    x0 = tc.model.layout.sleepers[5].x
+    for k in range(40):   # 0.12 m: a few elements
+        tc.do_step(np.array([x0, x0]) + 3e-3 * k, np.zeros(2), np.zeros(2))
+    cc, model = tc._compiled, tc.model
+    Zr = cc._rows[7]
+    A = tc.integ.step_matrix.tocsc()
+    assert len(set(cc.ent[0].tolist())) == 2
+    for i in range(2):
+        k = int(cc.ent[0, i])
+        body, e = cc._entry_body[k], cc._entry_element[k]
+        rows = body.load_rows(e)
+        kr, nr = rows.shape
+        assert cc.nr[i] == nr and np.array_equal(cc.gd[i, :nr], body.gdofs)
+        assert np.array_equal(cc.T[i, :kr, :nr], rows) and not cc.T[i, kr:].any() and not cc.T[i, :, nr:].any()
+        assert np.array_equal(cc.R[i], body.residual_block(e))
+        E = np.zeros((model.n, kr))
+        E[body.gdofs, :] = rows.T
+        ref = spla.spsolve(A, E).T
+        got = Zr[cc.zrow[i, :kr]]
+        assert np.abs(got - ref).max() <= 1e-10 * np.abs(ref).max()
+        assert not Zr[cc.zrow[i, kr:]].any()
 
 
 def test_fill_ordering_depends_on_the_pattern_only():

@@ -24,6 +24,7 @@ from orchestrator.results.analysis import analyse, analysis_columns, profile_con
 from orchestrator.results.figure_writer import FigureWriter
 from orchestrator.results.outdir import prepare_out_dir
 from track.frf import receptance
+from track.kernel import warm_up_in_background
 from track.model import reference_point
 from track.statics import static_equilibrium
 from track.timegrid import step_count
@@ -71,6 +72,7 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
     :class:`UserInputError` names the cause.
     """
     t_start = time.perf_counter()
+    warm_up_in_background()   # numba's one-time set-up beside the run's (track.kernel)
     with FigureWriter() as figures:   # first: its process imports matplotlib while the co-simulation runs
         out_dir = prepare_out_dir(out_dir)   # warns when it held an earlier run's results
         model = track_model(scenario.track)   # the model the run builds (its bodies cached) for the post-processing

@@ -74,7 +74,7 @@ class _SharedFactor:
     Zb_dofs: np.ndarray | None = None
     # the compiled step's own factorization (track.kernel.LDLFactor) and its influence data
     ldl: object = None
-    ldl_influence: dict = field(default_factory=dict)
+    ldl_rows: dict = field(default_factory=dict)   # track.kernel.element_rows key -> (influence rows, solved)
     ldl_Zb: np.ndarray | None = None
     ldl_have: np.ndarray | None = None
     ldl_Zb_dofs: np.ndarray | None = None

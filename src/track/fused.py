@@ -8,8 +8,8 @@ scenario: 80 us a step without a state record, 130-140 us with the sensor column
 records). Here the same Gauss–Seidel step (vehicle first with the force of the last step, then the
 track with the vehicle's end-of-step wheel motion, ``orchestrator.cosim.algorithms``) runs as a loop
 in one ``@njit`` function, :func:`gauss_seidel_steps`, that leaves to Python only what it cannot do:
-loading a rail element's data when a wheel enters it (:data:`track.kernel.NEED_ELEMENT`, the call
-returns and is resumed), errors, and progress reports between blocks of steps.
+errors, and progress reports between blocks of steps (the kernel loads a rail element's data
+itself when a wheel enters it).
 
 The vehicle comes in as arrays, so this module knows nothing of the vehicle package: the exact
 discretisation of a linear vehicle with the force held over the step (``vehicle.stepper``,
@@ -34,7 +34,6 @@ from .kernel import (
     C_PASSES,
     C_SOLVES,
     CONTACT_STEP_PARAMETERS,
-    NEED_ELEMENT,
     OK,
     P_CH,
     _njit,
@@ -46,9 +45,10 @@ from .kernel import (
 DONE, DIVERGED = 10, 11   # statuses of gauss_seidel_steps beyond the kernel's (OK is never returned)
 # contact_step's arguments without the per-step slots (the state, the wheels, the outputs), in its order
 FIXED_PARAMETERS = ("par", "cnt", "fgrav", "Kp", "Ki", "Kx", "Cp", "Ci", "Cx", "D", "bk", "bc", "bgap", "Zb",
-                    "have", "perm", "Lp", "Li", "Lx", "dd", "wside", "ts", "etab", "ec", "es", "ent", "T", "gd",
-                    "nr", "R", "Ze", "E", "fresh", "W", "surf", "wts", "work", "iwork", "yw", "tg", "tz", "tc",
-                    "chw")
+                    "have", "perm", "Lp", "Li", "Lx", "dd", "wside", "ts", "etab", "ec", "es", "ent",
+                    "erow", "eahead", "eR", "rload", "rbody", "bgd", "bnr", "Zr", "zhave", "zwork",
+                    "T", "gd", "nr", "R", "zrow", "E", "fresh", "W", "surf", "wts", "work", "iwork", "yw", "tg",
+                    "tz", "tc", "chw")
 _SLOT_NAMES = ("q0", "v0", "acc0", "F0", "Fc0", "x", "zw", "q1", "v1", "acc1", "F1", "Fc1", "out")
 
 
@@ -59,9 +59,10 @@ def _call_kernel(P, Q, V, A, F, Fc, c, x, zc, out):
     return contact_step(P[0], P[1], Q[c], V[c], A[c], F[c], Fc[c], P[2],
                         P[3], P[4], P[5], P[6], P[7], P[8], P[9], P[10], P[11], P[12], P[13], P[14],
                         P[15], P[16], P[17], P[18], P[19], x, zc,
-                        P[20], P[21], P[22], P[23], P[24], P[25], P[26], P[27], P[28], P[29], P[30], P[31],
-                        P[32], Q[n], V[n], A[n], F[n], Fc[n], out,
-                        P[33], P[34], P[35], P[36], P[37], P[38], P[39], P[40], P[41], P[42])
+                        P[20], P[21], P[22], P[23], P[24], P[25],
+                        P[26], P[27], P[28], P[29], P[30], P[31], P[32], P[33], P[34], P[35],
+                        P[36], P[37], P[38], P[39], P[40], P[41], P[42], Q[n], V[n], A[n], F[n], Fc[n], out,
+                        P[43], P[44], P[45], P[46], P[47], P[48], P[49], P[50], P[51], P[52])
 
 
 @_njit
@@ -123,7 +124,7 @@ def _signal_row(sig, j, t, xw, wheel, trk):
 
 
 @_njit
-def gauss_seidel_steps(k, k_end, resume, t0, h, every, veh, xoff, x0, speed,
+def gauss_seidel_steps(k, k_end, t0, h, every, veh, xoff, x0, speed,
                        P, Q, V, A, F, Fc, c, out, trk, limit, extrap_force, k_track, t0_track, record_every,
                        rec, rec_n, sig, tot):
     """Communication steps ``k .. k_end - 1`` of the Gauss–Seidel master, vehicle and track.
@@ -131,7 +132,6 @@ def gauss_seidel_steps(k, k_end, resume, t0, h, every, veh, xoff, x0, speed,
     Parameters
     ----------
     k, k_end : int            first step and the step to stop before.
-    resume : bool             step k's vehicle part is done (the call before returned NEED_ELEMENT).
     t0, h : float             master's start time and step [s]; step k runs over [t0 + k h, t0 + (k+1) h].
     every : int               signals every this many steps (row ``(k+1) // every``).
     veh : tuple               (G, z, y, u, ynew, Y, wheel, woff): the vehicle's discrete system and buffers
@@ -156,23 +156,19 @@ def gauss_seidel_steps(k, k_end, resume, t0, h, every, veh, xoff, x0, speed,
     Returns
     -------
     (status, k, c, k_track, rec_n, change)
-        status DONE (k == k_end), NEED_ELEMENT (load ``ent[1]``, call again with resume), DIVERGED
+        status DONE (k == k_end), DIVERGED
         (step k - 1 gave a force at or above ``limit``: the outputs hold it), or the kernel's failure
         (step k not taken; ``change`` its last force change [N]).
     """
     wheel, xw, zc = veh[6], trk[7], trk[8]
     cnt = P[1]
     while k < k_end:
-        if not resume:
-            _vehicle_step(veh, trk[1])
-            _wheels_in(x0 + speed * (t0 + k * h + h), xoff, wheel, trk[0], xw, zc)   # the vehicle's time after its step
-        resume = False
+        _vehicle_step(veh, trk[1])
+        _wheels_in(x0 + speed * (t0 + k * h + h), xoff, wheel, trk[0], xw, zc)   # the vehicle's time after its step
         cnt[:] = 0
         status, change = _call_kernel(P, Q, V, A, F, Fc, c, xw, zc, out)
         tot[0] += cnt[C_SOLVES]
         tot[1] += cnt[C_NEWTON]
-        if status == NEED_ELEMENT:
-            return NEED_ELEMENT, k, c, k_track, rec_n, 0.0
         if status != OK:
             return status, k, c, k_track, rec_n, change
         tot[2] += cnt[C_PASSES]
@@ -292,8 +288,7 @@ class CoupledSteps(EngineBuffers):
     def run(self, k: int, k_end: int, t0: float, h: float, every: int, Fz_in: np.ndarray, sig: tuple) -> tuple:
         """Steps ``k .. k_end - 1`` from the engine's state and the vehicle's input ``Fz_in`` [N].
 
-        Loads elements as the wheels enter them, writes the state back into the engine after
-        the call, and raises as the stepped path does (:class:`track.dynamics.ConvergenceError`,
+        Writes the state back into the engine after the call, and raises as the stepped path does (:class:`track.dynamics.ConvergenceError`,
         :class:`track.cosim.DivergenceError`; then :attr:`vehicle_steps` and :attr:`signal_steps`
         say how far the vehicle and the signals got). Returns ``(k, Fz)``: the steps taken up to,
         the vehicle's next input [N] (a copy)."""
@@ -305,21 +300,14 @@ class CoupledSteps(EngineBuffers):
         rec = e.record
         if e.record_every:
             rec.reserve(len(rec) + (k_end - k) // e.record_every + 1)
-        k0_track, k_start, resume = it.k, k, False
+        k0_track, k_start = it.k, k
         self.tot[:] = 0
         self.vehicle_steps, self.signal_steps = 0, k
-        while True:
-            status, k, c, k_track, rec_n, change = gauss_seidel_steps(
-                k, k_end, resume, t0, h, every, self.veh, self.xoff, self.x0, self.speed, self.P,
-                self.Q, self.V, self.A, self.F, self.Fc, c, self.out, self.trk, e._limit, e.extrapolate_force,
-                it.k, it.t0, e.record_every, rec._args, len(rec), sig, self.tot)
-            it.k, rec.n = k_track, rec_n
-            if status != NEED_ELEMENT:
-                break
-            cc = self.cc
-            for i in np.flatnonzero(cc.ent[0] != cc.ent[1]).tolist():
-                cc._load(i, int(cc.ent[1, i]))
-            resume = True
+        status, k, c, k_track, rec_n, change = gauss_seidel_steps(
+            k, k_end, t0, h, every, self.veh, self.xoff, self.x0, self.speed, self.P,
+            self.Q, self.V, self.A, self.F, self.Fc, c, self.out, self.trk, e._limit, e.extrapolate_force,
+            it.k, it.t0, e.record_every, rec._args, len(rec), sig, self.tot)
+        it.k, rec.n = k_track, rec_n
         self._write_back(c, it.k - k0_track)
         # what the caller's vehicle and signals hold: a failed step had its vehicle part done, a
         # diverged one has no signal row (the stepped path raises before writing them)

@@ -19,9 +19,12 @@ the surface heights under it (:func:`_locate_wheels`) from per-side element tabl
 built once (:func:`element_tables`: the running rails' elements in track order, with
 the cubic coefficients of the body's own shape functions and a code for the surface
 geometry, whose height functions are :mod:`track.contact`'s, compiled). When a wheel
-enters an element whose data (load rows, residual flexibility, influence columns
-``A^{-1} r``) are not loaded, it returns :data:`NEED_ELEMENT` before touching
-anything; the caller loads them and calls again (about one step in thirty).
+enters another element, the kernel loads that element's data itself from tables built once
+(:func:`element_rows`: load rows, residual flexibility, the body's coordinates) and points the
+wheel at the element's influence rows ``A^{-1} r`` in a table of every running body's rows,
+solved on first use together with those of the next :data:`INFLUENCE_AHEAD` elements
+(:func:`_solve_rows`). (Until 2026-11-27 the kernel returned to its caller for that, about one
+step in thirty: ~47 us each, 4-6 % of a 64-sleeper passage.)
 With the profile contact (:class:`track.contact.TableGeometry`) the surface code is
 ``SURF_TABLE + t``: the heights and the Hertz constants of both surfaces are looked up
 bilinearly in contact table ``t`` at the wheel's x and lateral offset
@@ -97,9 +100,8 @@ KERNEL_ENV = "TURNOUT_TRACK_KERNEL"  # "numpy": the pure-numpy reference path; a
 PRUNE_RTOL = 1e-14  # drop |X_ij| <= this * sqrt(|X_ii X_jj|): the round-off of the reductions' products
                     # sits at 1e-20..1e-15, the smallest physical couplings at >= 1e-13 (module doc)
 
-# status codes returned by contact_step (NEED_ELEMENT: a wheel entered an element whose data
-# the caller must load first; nothing was changed)
-OK, PASSES_FAILED, NEWTON_FAILED, NEED_ELEMENT = 0, 1, 2, 3
+# status codes returned by contact_step
+OK, PASSES_FAILED, NEWTON_FAILED = 0, 1, 2
 # surface codes of the element tables: which geometry gives the surface heights under a wheel
 SURF_FLAT, SURF_CROSSING, SURF_JOINT, SURF_GIVEN = 0, 1, 2, 3   # GIVEN: computed by the caller
 SURF_TABLE = 4   # codes SURF_TABLE + t: contact table t (profile contact, track.contact.TableGeometry)
@@ -183,6 +185,35 @@ if numba is not None:
 
 def _njit(f):
     return numba.njit(cache=True, nogil=True, error_model="numpy")(f) if numba is not None else f
+
+
+def warm_up_in_background():
+    """Start numba's one-time set-up of its CPU target in a daemon thread; returns the thread (None
+    without numba, or where numba's internals differ from 0.5x-0.6x's).
+
+    A process's first compiled call, even one loaded from numba's cache, first loads the registries
+    of numba's lowering implementations (``BaseContext.refresh``: ~0.3 s on the benchmark machine,
+    a tenth of ``turnout run``'s wall time). Started when a run starts, the set-up overlaps with
+    the run's own (reading the scenario, unpacking the FMUs, building and factoring the track):
+    ``turnout run`` of the default scenario, 2.84-3.03 s against 2.88-3.34 s without
+    (benchmarks/RESULTS.md, 2026-11-27). The thread holds numba's compiler lock, so a compiled call
+    made meanwhile waits for the set-up instead of doing it beside it."""
+    if numba is None:
+        return None
+    try:
+        from numba.core.compiler_lock import global_compiler_lock
+        from numba.core.registry import cpu_target
+    except ImportError:   # pragma: no cover - other numba internals: the first call does the set-up
+        return None
+    import threading
+
+    def _refresh():
+        with global_compiler_lock:
+            cpu_target.target_context.refresh()
+
+    thread = threading.Thread(target=_refresh, name="numba-warm-up", daemon=True)
+    thread.start()
+    return thread
 
 
 hertz_nb = _njit(hertz)
@@ -449,6 +480,69 @@ def _ballast_row(j, D, Zb, have, perm, Lp, Li, Lx, d, e, work, cnt):
         cnt[C_SOLVES] += 1
 
 
+@_njit
+def _solve_rows(k, erow, eahead, rload, rbody, bgd, bnr, Zr, zhave, zwork, perm, Lp, Li, Lx, d, cnt):
+    """Make the influence rows of table entry ``k`` available: when one is missing, solve the missing
+    rows of ``eahead[k]`` (those of its element and the next INFLUENCE_AHEAD - 1 of its body, in
+    order) in one :func:`ldl_solve_many` call, each row's load vector ``rload[r]`` placed on its
+    body's coordinates ``bgd[rbody[r]]``; counts the solves. A column takes the same operations
+    whatever the others, so a row is the same to the last digit however it was grouped."""
+    missing = False
+    for j in range(4):
+        if zhave[erow[k, j]] == 0:
+            missing = True
+    if not missing:
+        return
+    n = d.size
+    nc = 0
+    for r in eahead[k]:
+        if r >= 0 and zhave[r] == 0:
+            nc += 1
+    B = zwork[0:n * nc].reshape((n, nc))
+    X = zwork[n * nc:2 * n * nc].reshape((n, nc))
+    Wk = zwork[2 * n * nc:3 * n * nc].reshape((n, nc))
+    B[:] = 0.0
+    c = 0
+    for r in eahead[k]:
+        if r >= 0 and zhave[r] == 0:
+            b = rbody[r]
+            for a in range(bnr[b]):
+                B[bgd[b, a], c] = rload[r, a]
+            c += 1
+    ldl_solve_many(perm, Lp, Li, Lx, d, B, X, Wk)
+    c = 0
+    for r in eahead[k]:
+        if r >= 0 and zhave[r] == 0:
+            for i in range(n):
+                Zr[r, i] = X[i, c]
+            zhave[r] = 1
+            c += 1
+    cnt[C_SOLVES] += nc
+
+
+@_njit
+def _load_entry(i, k, erow, eahead, eR, rload, rbody, bgd, bnr, Zr, zhave, zwork, perm, Lp, Li, Lx, d,
+                T, gd, nr, R, zrow, fresh, ent, cnt):
+    """Wheel i's element data from table entry ``k``: load rows ``T[i]`` (zero beyond the element's),
+    coordinates ``gd[i]``, ``nr[i]``, residual flexibility ``R[i]``, influence rows ``zrow[i]`` (solved
+    when missing, :func:`_solve_rows`); marks the wheel ``fresh`` and ``k`` loaded."""
+    _solve_rows(k, erow, eahead, rload, rbody, bgd, bnr, Zr, zhave, zwork, perm, Lp, Li, Lx, d, cnt)
+    b = rbody[erow[k, 0]]
+    nb = bnr[b]
+    for j in range(4):
+        r = erow[k, j]
+        zrow[i, j] = r
+        for a in range(T.shape[2]):
+            T[i, j, a] = rload[r, a] if a < nb else 0.0
+        for c in range(4):
+            R[i, j, c] = eR[k, j, c]
+    for a in range(nb):
+        gd[i, a] = bgd[b, a]
+    nr[i] = nb
+    fresh[i] = 1
+    ent[0, i] = k
+
+
 # ------------------------------------------------------------------------------- step stages
 # The stages of one step, in the order contact_step calls them; the numpy reference
 # (TrackIntegrator.step_contacts) has methods of the same names (but for the first: the
@@ -578,9 +672,9 @@ def _wheel_loads(a1, W, T, gd, nr, Fc0, Fn, wts, rhs):
 
 
 @_njit
-def _coupling_blocks(T, gd, nr, Ze, fresh, E):
-    """``E[i, j] = T_i Ze_j[:, gd_i]^T`` (4 x 4 per wheel pair): load rows of wheel i's element
-    times the influence columns of wheel j's, on wheel i's coordinates.
+def _coupling_blocks(T, gd, nr, Zr, zrow, fresh, E):
+    """``E[i, j, r, c] = T_i[r] . Zr[zrow[j, c]][gd_i]`` (4 x 4 per wheel pair): load rows of wheel i's
+    element times the influence columns of wheel j's, on wheel i's coordinates.
 
     Recomputed only for the pairs with a wheel whose element data were loaded since
     (``fresh``, cleared here): G then costs 16 products per pair and step instead of
@@ -592,9 +686,10 @@ def _coupling_blocks(T, gd, nr, Ze, fresh, E):
             if fresh[i] or fresh[j]:
                 for r in range(4):
                     for c in range(4):
+                        z = Zr[zrow[j, c]]
                         t = 0.0
                         for a in range(nr[i]):
-                            t += T[i, r, a] * Ze[j, c, gd[i, a]]
+                            t += T[i, r, a] * z[gd[i, a]]
                         E[i, j, r, c] = t
     for i in range(m):
         fresh[i] = 0
@@ -678,7 +773,7 @@ def _contact_newton(chw, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, 
 
 
 @_njit
-def _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn, Fc0, W, Ze, corr, newc):
+def _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn, Fc0, W, Zr, zrow, corr, newc):
     """Corrections ``newc`` [N] of the candidate bushings at the end-of-step state of this pass;
     returns the largest change from ``corr`` [N]."""
     m = Fn.size
@@ -691,7 +786,7 @@ def _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn,
             if dF != 0.0:
                 for r in range(4):
                     if W[i, r] != 0.0:
-                        s -= a1 * dF * W[i, r] * Ze[i, r, dj]
+                        s -= a1 * dF * W[i, r] * Zr[zrow[i, r], dj]
         newc[c] = _correction(bk[cidx[c]], bc[cidx[c]], bgap[cidx[c]], qp[dj] + bh2 * s, vp[dj] + gh * s)
         if abs(newc[c] - corr[c]) > change:
             change = abs(newc[c] - corr[c])
@@ -716,11 +811,11 @@ def _ballast_row_correction(a1, ftol0, nc, cidx, D, Zb, have, perm, Lp, Li, Lx, 
 
 
 @_njit
-def _corrector(a1, bh2, gh, qp, vp, acc_lin, Fn, Fc0, W, Ze, acc1, q1, v1):
+def _corrector(a1, bh2, gh, qp, vp, acc_lin, Fn, Fc0, W, Zr, zrow, acc1, q1, v1):
     """End-of-step state: ``acc1 = acc_lin - (1+alpha) sum_i (Fn_i - Fc0_i) A^-1 r_i``,
     ``q1 = qp + beta h^2 acc1``, ``v1 = vp + gamma h acc1``.
 
-    One pass over the n dofs per influence column ``Ze[i, r]`` (m, 4, n): the passes are
+    One pass over the n dofs per influence column ``Zr[zrow[i, r]]``: the passes are
     vectorized axpys, measured 3x faster than one pass over n with an inner loop over the
     4 m columns of an (n, 4 m) layout (7 vs 20 us at n = 2763, m = 4).
     """
@@ -733,8 +828,9 @@ def _corrector(a1, bh2, gh, qp, vp, acc_lin, Fn, Fc0, W, Ze, acc1, q1, v1):
             for r in range(4):
                 f = a1 * dF * W[i, r]
                 if f != 0.0:
+                    z = Zr[zrow[i, r]]
                     for i2 in range(n):
-                        acc1[i2] -= f * Ze[i, r, i2]
+                        acc1[i2] -= f * z[i2]
     for i2 in range(n):
         q1[i2] = qp[i2] + bh2 * acc1[i2]
         v1[i2] = vp[i2] + gh * acc1[i2]
@@ -789,7 +885,7 @@ def _workspace(work, n, m, nbal):
 
 @_njit
 def _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts, gd, nr, G, res, zw,
-            surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap, qp, vp, W, Ze, corr, newc, Zb, have,
+            surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap, qp, vp, W, Zr, zrow, corr, newc, Zb, have,
             perm, Lp, Li, Lx, dd, unit, y):
     """The modified-Newton passes of a step: contact Newton, then the ballast bushings' change;
     repeated (with the bushings' influence rows) while a bushing changes state.
@@ -803,7 +899,7 @@ def _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, ac
         if not _contact_newton(chw, ctol, max_newton, bh2, wpred, acc_lin, wts, gd, nr, G, res, zw, surf,
                                Fc0, Fn, wlin, cpl, out, cnt):
             return NEWTON_FAILED, change, it
-        change = _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn, Fc0, W, Ze,
+        change = _ballast_change(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc_lin, Fn, Fc0, W, Zr, zrow,
                                  corr, newc)
         if change <= ftol:
             return OK, change, it
@@ -818,7 +914,8 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
                  D, bk, bc, bgap, Zb, have,
                  perm, Lp, Li, Lx, dd,
                  x, zw, wside, ts, etab, ec, es, ent,
-                 T, gd, nr, R, Ze, E, fresh,
+                 erow, eahead, eR, rload, rbody, bgd, bnr, Zr, zhave, zwork,
+                 T, gd, nr, R, zrow, E, fresh,
                  q1, v1, acc1, F1, Fc1, out, W, surf, wts, work, iwork,
                  yw, tg, tz, tc, chw):
     """One HHT-alpha step with Hertz contacts solved implicitly (TrackIntegrator.step_contacts).
@@ -849,10 +946,15 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     ts, etab, ec, es : int64[3], float64[E, 3], float64[E, 4, 4], int64[E]
         The element tables (:func:`_locate_wheels`).
     ent : int64[2, m]      table entry loaded for each wheel / wanted (written).
+    erow, eahead, eR, rload, rbody, bgd, bnr : the entries' element data (:func:`element_rows`).
+    Zr : float64[NR, n], zhave : uint8[NR]
+        Influence rows ``A^{-1} r`` of the running bodies' load rows (row 0 zero), which are solved
+        (filled on demand, :func:`_solve_rows`); shared by every step on the same factor.
+    zwork : float64[3 n AH]   workspace of :func:`_solve_rows` (AH: the width of ``eahead``).
     T : float64[m, 4, nrmax], gd : int64[m, nrmax], nr : int64[m]
-        Load rows of each wheel's element on its body's coordinates ``gd``.
-    R : float64[m, 4, 4]   residual flexibility of the element [m/N].
-    Ze : float64[m, 4, n]  ``A^{-1}`` of each load row.
+        Load rows of each wheel's element on its body's coordinates ``gd`` (written on entry).
+    R : float64[m, 4, 4]   residual flexibility of the element [m/N] (written on entry).
+    zrow : int64[m, 4]     rows of ``Zr`` of each wheel's load rows (written on entry).
     E : float64[m, m, 4, 4], fresh : uint8[m]
         Coupling blocks between the wheels' elements (:func:`_coupling_blocks`) and which
         wheels' element data were loaded since they were computed.
@@ -868,13 +970,15 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     Returns
     -------
     status : int
-        OK; NEED_ELEMENT (load the data of the entries ``ent[1]`` and call again; nothing
-        changed); PASSES_FAILED or NEWTON_FAILED (the outputs are then meaningless).
+        OK; PASSES_FAILED or NEWTON_FAILED (the outputs are then meaningless).
     change : float
         Last force change between passes [N].
     """
     if not _locate_wheels(par, x, yw, wside, ts, etab, ec, es, ent, W, surf, tg, tz, tc, chw):
-        return NEED_ELEMENT, 0.0
+        for i in range(x.size):
+            if ent[0, i] != ent[1, i]:
+                _load_entry(i, ent[1, i], erow, eahead, eR, rload, rbody, bgd, bnr, Zr, zhave, zwork,
+                            perm, Lp, Li, Lx, dd, T, gd, nr, R, zrow, fresh, ent, cnt)
     h, a_, b, g = par[P_H], par[P_ALPHA], par[P_BETA], par[P_GAMMA]
     safety, floor, beta_s = par[P_SAFETY], par[P_FLOOR], par[P_BETA_S]
     ctol0, crel, ftol0, frel = par[P_CTOL], par[P_CREL], par[P_FTOL], par[P_FREL]
@@ -892,7 +996,7 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     fmax = _wheel_loads(a1, W, T, gd, nr, Fc0, Fn, wts, rhs)
     ldl_solve(perm, Lp, Li, Lx, dd, rhs, acc_lin, unit)
     cnt[C_SOLVES] += 1
-    _coupling_blocks(T, gd, nr, Ze, fresh, E)
+    _coupling_blocks(T, gd, nr, Zr, zrow, fresh, E)
     _contact_coupling(a1, bh2, W, R, gd, nr, wts, E, qp, G, res, wpred)
     ctol = ctol0 + crel * fmax
     ftol = ftol0 + frel * fmax
@@ -900,11 +1004,11 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     # modified-Newton passes: they repeat only while a ballast bushing changes state
     status, change, it = _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts,
                                  gd, nr, G, res, zw, surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap,
-                                 qp, vp, W, Ze, corr, newc, Zb, have, perm, Lp, Li, Lx, dd, unit, y)
+                                 qp, vp, W, Zr, zrow, corr, newc, Zb, have, perm, Lp, Li, Lx, dd, unit, y)
     if status != OK:
         return status, change
 
-    _corrector(a1, bh2, gh, qp, vp, acc_lin, Fn, Fc0, W, Ze, acc1, q1, v1)
+    _corrector(a1, bh2, gh, qp, vp, acc_lin, Fn, Fc0, W, Zr, zrow, acc1, q1, v1)
     _end_forces(fgrav, nc, cidx, D, corr, Fn, wts, gd, nr, F1, Fc1, out)
     cnt[C_PASSES] += it
     if it > cnt[C_MAXPASS]:
@@ -1037,16 +1141,87 @@ def _element_count(body) -> int:
     return body.point_nodes().size - 1
 
 
+def element_rows(bodies: list, elements: list) -> dict:
+    """The element data :func:`contact_step` loads when a wheel enters table entry ``k`` (body
+    ``bodies[k]``, element ``elements[k]``, as :func:`element_tables` returns them).
+
+    Every load row of the running bodies gets a row id (row 0: a zero row, for the unused rows
+    of an element with fewer than four); rows shared by neighbouring elements (a beam node's two
+    dofs, a solid path node) have one id.
+
+    Returns
+    -------
+    dict with
+        ``erow`` int64[E, 4]: the row ids of entry k's load rows (:meth:`Body.load_rows`, 0 beyond);
+        ``eahead`` int64[E, AH]: the rows solved together when one of entry k's is missing: those of
+        its element and of the next INFLUENCE_AHEAD - 1 of its body, in order, each once (-1 after);
+        ``eR`` float64[E, 4, 4]: the residual flexibility of the element [m/N];
+        ``rload`` float64[NR, nrmax], ``rbody`` int64[NR]: each row's load vector on the coordinates
+        of its body (index into ``bgd`` int64[NB, nrmax], ``bnr`` int64[NB]: the bodies' global
+        coordinates and their number);
+        ``key``: the rows' identity (body names and row counts): steps on the same factor with the
+        same key share their influence rows.
+    """
+    order: dict = {}
+    for b in bodies:
+        order.setdefault(b.name, b)
+    names = list(order)
+    first = {}
+    nrows, row_of = 1, {}
+    for name in names:
+        b = order[name]
+        first[name] = nrows
+        ids = {r for e in range(_element_count(b)) for r in _row_ids(b, e)}
+        nrows += max(ids) + 1
+    nrmax = max(order[nm].rom.nr for nm in names)
+    rload = np.zeros((nrows, nrmax))
+    rbody = np.zeros(nrows, np.int64)
+    bgd = np.zeros((len(names), nrmax), np.int64)
+    bnr = np.zeros(len(names), np.int64)
+    for bi, name in enumerate(names):
+        b, o = order[name], first[name]
+        bgd[bi, :b.rom.nr] = b.gdofs
+        bnr[bi] = b.rom.nr
+        for e in range(_element_count(b)):
+            rows = b.load_rows(e)
+            for j, r in enumerate(_row_ids(b, e)):
+                rload[o + r, :rows.shape[1]] = rows[j]
+                rbody[o + r] = bi
+        row_of[name] = o
+    width = max(len(_ahead_rows(order[nm], 0)) for nm in names)
+    E = len(bodies)
+    erow = np.zeros((E, 4), np.int64)
+    eahead = np.full((E, width), -1, np.int64)
+    eR = np.zeros((E, 4, 4))
+    for k, (b, e) in enumerate(zip(bodies, elements)):
+        o = row_of[b.name]
+        ids = _row_ids(b, e)
+        erow[k, :len(ids)] = [o + r for r in ids]
+        ahead = _ahead_rows(b, e)
+        eahead[k, :len(ahead)] = [o + r for r in ahead]
+        eR[k] = b.residual_block(e)
+    key = tuple((nm, first[nm]) for nm in names) + (nrows,)
+    return dict(erow=erow, eahead=eahead, eR=eR, rload=rload, rbody=rbody, bgd=bgd, bnr=bnr, key=key)
+
+
+def _ahead_rows(body, e: int) -> list:
+    """Row ids of elements ``e .. e + INFLUENCE_AHEAD - 1`` of ``body`` (within it), each once, in order."""
+    out: dict = {}
+    for el in range(e, min(e + INFLUENCE_AHEAD, _element_count(body))):
+        for r in _row_ids(body, el):
+            out.setdefault(r)
+    return list(out)
+
+
 class CompiledContacts:
     """The compiled counterpart of :meth:`TrackIntegrator.step_contacts` for a wheel set.
 
-    Holds the kernel's buffers and element tables and, per wheel, the data of the FE
-    element it is in (load rows on the body's coordinates, residual flexibility, the
-    influence columns ``A^{-1} r``), loaded only when a wheel enters another element
-    (the kernel then returns NEED_ELEMENT before doing anything, and is called again).
-    The wheels' elements, shape-function values and surface heights are found in the
-    kernel (:func:`element_tables`); per step in Python there is one :func:`contact_step`
-    call. The integrator's state and counters are updated as by ``step_contacts``.
+    Holds the kernel's buffers and element tables (:func:`element_tables`,
+    :func:`element_rows`) and the influence rows of the running bodies (shared by the
+    integrators of one factor). The wheels' elements, shape-function values and surface
+    heights are found in the kernel, which also loads an element's data when a wheel enters
+    it; per step in Python there is one :func:`contact_step` call. The integrator's state
+    and counters are updated as by ``step_contacts``.
 
     Parameters
     ----------
@@ -1102,6 +1277,14 @@ class CompiledContacts:
         *self._tables, self._entry_body, self._entry_element = element_tables(model, geometry, par, tables)
         self._given = bool((self._tables[3] == SURF_GIVEN).any())   # some heights from Python
         self._contact_tables = _stack_tables(tables)
+        rows = element_rows(self._entry_body, self._entry_element)
+        shared = sh.ldl_rows.get(rows["key"])
+        if shared is None:                        # row 0 is the zero row: always "solved"
+            shared = sh.ldl_rows[rows["key"]] = (np.zeros((rows["rload"].shape[0], n)),
+                                                 np.zeros(rows["rload"].shape[0], np.uint8))
+            shared[1][0] = 1
+        self._rows = (rows["erow"], rows["eahead"], rows["eR"], rows["rload"], rows["rbody"], rows["bgd"],
+                      rows["bnr"], *shared, np.empty(3 * n * rows["eahead"].shape[1]))
         self.yw = np.zeros(m)
         self.chw = np.zeros((m, 2))
         self.wside = np.array([("left", "right").index(s) for s in self.sides], np.int64)
@@ -1112,7 +1295,7 @@ class CompiledContacts:
         self.gd = np.zeros((m, nrmax), np.int64)
         self.nr = np.zeros(m, np.int64)
         self.R = np.zeros((m, 4, 4))
-        self.Ze = np.zeros((m, 4, n))
+        self.zrow = np.zeros((m, 4), np.int64)
         self.E = np.zeros((m, m, 4, 4))
         self.fresh = np.ones(m, np.uint8)
         self.surf = np.zeros((m, 2))
@@ -1130,8 +1313,8 @@ class CompiledContacts:
         args = [self.par, self.cnt, None, None, None, None, None, self.model.f_gravity,
                 *self._K, *self._C, *self._bal, sh.ldl_Zb, sh.ldl_have,
                 f.perm, f.Lp, f.Li, f.Lx, f.d,
-                None, None, self.wside, *self._tables, self.ent,
-                self.T, self.gd, self.nr, self.R, self.Ze, self.E, self.fresh,
+                None, None, self.wside, *self._tables, self.ent, *self._rows,
+                self.T, self.gd, self.nr, self.R, self.zrow, self.E, self.fresh,
                 None, None, None, None, None, None, self.W, self.surf, self.wts, self.work, self.iwork,
                 self.yw, *self._contact_tables, self.chw]
         if len(args) != len(CONTACT_STEP_PARAMETERS):
@@ -1139,56 +1322,21 @@ class CompiledContacts:
         return args
 
     # ------------------------------------------------------------------ wheels
-    def influence_rows(self, body, e: int, out: np.ndarray | None = None) -> np.ndarray:
-        """``A^{-1} r`` of the load rows of element ``e`` of ``body``, shape (k, n) (written into ``out[:k]``
-        and ``out`` returned when given).
-
-        Cached per load row, not per element: neighbouring elements share a node (a beam
-        element's rows are those of its two nodes' dofs, the solid's of its two path nodes),
-        so a wheel running along a body solves each row once, not twice. Every column of
-        :func:`ldl_solve_many` takes the same operations whatever the others, so a row is the
-        same, to the last digit, however it was grouped (the sensor signals of the default, the
-        measurement and the profile scenarios came out identical to per-element rows). So
-        when a row is missing, the rows of the next :data:`INFLUENCE_AHEAD` elements (where
-        the wheels, running towards increasing x, go next) are solved in the same call: a
-        column costs ~20 us in a call of 16-32 columns against ~100 us in one of two
-        (n = 1741, benchmarks/RESULTS.md 2026-11-25); the solves counter counts them all.
-        """
-        cache = self._sh.ldl_influence
-        ids = _row_ids(body, e)
-        if any((body.name, r) not in cache for r in ids):
-            last = min(e + INFLUENCE_AHEAD, _element_count(body))
-            want: dict = {}                    # row id -> (element, row of its load rows)
-            for el in range(e, last):
-                for j, r in enumerate(_row_ids(body, el)):
-                    if (body.name, r) not in cache and r not in want:
-                        want[r] = (el, j)
-            E = np.zeros((self.model.n, len(want)))
-            for col, (el, j) in enumerate(want.values()):
-                E[body.gdofs, col] = body.load_rows(el)[j]
-            for r, z in zip(want, self.f.solve(E).T):
-                cache[(body.name, r)] = np.ascontiguousarray(z)
-            self.integ.counters.solves += len(want)
-        if out is None:
-            return np.stack([cache[(body.name, r)] for r in ids])
-        for j, r in enumerate(ids):
-            out[j] = cache[(body.name, r)]
-        return out
-
-    def _load(self, i: int, k: int) -> None:
-        """The data of table entry ``k`` (a body's element) for wheel i."""
-        body, e = self._entry_body[k], self._entry_element[k]
-        rows = body.load_rows(e)
-        kr, nr = rows.shape
-        self.T[i] = 0.0
-        self.T[i, :kr, :nr] = rows
-        self.gd[i, :nr] = body.gdofs
-        self.nr[i] = nr
-        self.R[i] = body.residual_block(e)
-        self.Ze[i, kr:] = 0.0
-        self.influence_rows(body, e, self.Ze[i])
-        self.fresh[i] = 1
-        self.ent[0, i] = k
+    def influence_rows(self, body, e: int) -> np.ndarray:
+        """``A^{-1} r`` of the load rows of element ``e`` of ``body``, shape (k, n): the rows the kernel
+        uses when a wheel enters that element (:func:`_solve_rows`: solved on first use with those of
+        the next INFLUENCE_AHEAD - 1 elements, where the wheels, running towards increasing x, go
+        next; a column costs ~20 us in a call of 16-32 columns against ~100 us in one of two, n = 1741,
+        benchmarks/RESULTS.md 2026-11-25). The solves counter counts them all."""
+        k = next((k for k, (b, el) in enumerate(zip(self._entry_body, self._entry_element))
+                  if b is body and el == e), None)
+        if k is None:
+            raise ValueError(f"{body.name}: element {e} is not one a wheel runs on")
+        erow, eahead, _, rload, rbody, bgd, bnr, Zr, zhave, zwork = self._rows
+        f, cnt = self.f, np.zeros(4, np.int64)
+        _solve_rows(k, erow, eahead, rload, rbody, bgd, bnr, Zr, zhave, zwork, f.perm, f.Lp, f.Li, f.Lx, f.d, cnt)
+        self.integ.counters.solves += int(cnt[C_SOLVES])
+        return Zr[erow[k, :len(_row_ids(body, e))]].copy()
 
     def _given_surfaces(self, x: np.ndarray) -> None:
         """Surface heights computed in Python (a geometry the kernel does not have, e.g. a table)."""
@@ -1233,12 +1381,7 @@ class CompiledContacts:
         args[s0:s0 + 5] = it.q, it.v, it.a, it.F, Fc0
         args[sx:sx + 2] = x, zw
         args[sn:sn + 6] = new[0], new[1], new[2], new[3], Fc1, out
-        while True:
-            status, change = contact_step(*args)
-            if status != NEED_ELEMENT:
-                break
-            for i in np.flatnonzero(self.ent[0] != self.ent[1]).tolist():
-                self._load(i, int(self.ent[1, i]))
+        status, change = contact_step(*args)
         c = it.counters
         c.solves += int(cnt[C_SOLVES])
         c.contact_newton += int(cnt[C_NEWTON])

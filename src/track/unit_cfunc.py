@@ -18,11 +18,13 @@ from numba.extending import intrinsic
 from .kernel import _njit
 from .unit_step import unit_sensors, unit_step
 
-# kind of each array of unit_step's arguments after t, h (flattened: P's 43 arrays, trk's 9, the record's 10):
+# kind of each array of unit_step's arguments after t, h (flattened: P's 53 arrays, trk's 9, the record's 10):
 # f/i/w/u float64/int64/uint32/uint8, then the number of dimensions
 SPEC = ("f1", "i1", "f1",
         "f1", "i1", "f1", "w1", "w1", "f1", "w1", "w1", "f1", "i1", "f1", "f1", "f1", "f2", "u1", "w1", "w1",
-        "w1", "f1", "f1", "i1", "i1", "f2", "f3", "i1", "i2", "f3", "i2", "i1", "f3", "f3", "f4", "u1", "f2",
+        "w1", "f1", "f1", "i1", "i1", "f2", "f3", "i1", "i2",
+        "i2", "i2", "f3", "f2", "i1", "i2", "i1", "f2", "u1", "f1",
+        "f3", "i2", "i1", "f3", "i2", "f4", "u1", "f2",
         "f2", "f2", "f1", "i1", "f1", "f2", "f4", "f4", "f2",
         "f2", "f2", "f2", "f2", "f2", "f2",
         "f1", "f1", "f1", "f1", "f1", "f2", "f1", "f1", "f1",
@@ -118,17 +120,19 @@ def unit_step_c(ctx_address, t, h):
     P = (_f1(ctx, 3), _i1(ctx, 4), _f1(ctx, 5), _w1(ctx, 6), _w1(ctx, 7), _f1(ctx, 8), _w1(ctx, 9),
          _w1(ctx, 10), _f1(ctx, 11), _i1(ctx, 12), _f1(ctx, 13), _f1(ctx, 14), _f1(ctx, 15), _f2(ctx, 16),
          _u1(ctx, 17), _w1(ctx, 18), _w1(ctx, 19), _w1(ctx, 20), _f1(ctx, 21), _f1(ctx, 22), _i1(ctx, 23),
-         _i1(ctx, 24), _f2(ctx, 25), _f3(ctx, 26), _i1(ctx, 27), _i2(ctx, 28), _f3(ctx, 29), _i2(ctx, 30),
-         _i1(ctx, 31), _f3(ctx, 32), _f3(ctx, 33), _f4(ctx, 34), _u1(ctx, 35), _f2(ctx, 36), _f2(ctx, 37),
-         _f2(ctx, 38), _f1(ctx, 39), _i1(ctx, 40), _f1(ctx, 41), _f2(ctx, 42), _f4(ctx, 43), _f4(ctx, 44),
-         _f2(ctx, 45))
-    Q, V, A, F, Fc, out = _f2(ctx, 46), _f2(ctx, 47), _f2(ctx, 48), _f2(ctx, 49), _f2(ctx, 50), _f2(ctx, 51)
-    trk = (_f1(ctx, 52), _f1(ctx, 53), _f1(ctx, 54), _f1(ctx, 55), _f1(ctx, 56), _f2(ctx, 57), _f1(ctx, 58),
-           _f1(ctx, 59), _f1(ctx, 60))
-    limit = _f1(ctx, 61)
-    rec = (_i1(ctx, 62), _i1(ctx, 63), _i1(ctx, 64), _f1(ctx, 65), _f2(ctx, 66), _f2(ctx, 67), _f3(ctx, 68),
-           _f2(ctx, 69), _f2(ctx, 70), _f2(ctx, 71))
-    tot, outbuf = _i1(ctx, 72), _f1(ctx, 73)
+         _i1(ctx, 24), _f2(ctx, 25), _f3(ctx, 26), _i1(ctx, 27), _i2(ctx, 28),
+         _i2(ctx, 29), _i2(ctx, 30), _f3(ctx, 31), _f2(ctx, 32), _i1(ctx, 33), _i2(ctx, 34), _i1(ctx, 35),
+         _f2(ctx, 36), _u1(ctx, 37), _f1(ctx, 38),
+         _f3(ctx, 39), _i2(ctx, 40), _i1(ctx, 41), _f3(ctx, 42), _i2(ctx, 43), _f4(ctx, 44), _u1(ctx, 45),
+         _f2(ctx, 46), _f2(ctx, 47), _f2(ctx, 48), _f1(ctx, 49), _i1(ctx, 50), _f1(ctx, 51), _f2(ctx, 52),
+         _f4(ctx, 53), _f4(ctx, 54), _f2(ctx, 55))
+    Q, V, A, F, Fc, out = _f2(ctx, 56), _f2(ctx, 57), _f2(ctx, 58), _f2(ctx, 59), _f2(ctx, 60), _f2(ctx, 61)
+    trk = (_f1(ctx, 62), _f1(ctx, 63), _f1(ctx, 64), _f1(ctx, 65), _f1(ctx, 66), _f2(ctx, 67), _f1(ctx, 68),
+           _f1(ctx, 69), _f1(ctx, 70))
+    limit = _f1(ctx, 71)
+    rec = (_i1(ctx, 72), _i1(ctx, 73), _i1(ctx, 74), _f1(ctx, 75), _f2(ctx, 76), _f2(ctx, 77), _f3(ctx, 78),
+           _f2(ctx, 79), _f2(ctx, 80), _f2(ctx, 81))
+    tot, outbuf = _i1(ctx, 82), _f1(ctx, 83)
     return unit_step(t, h, inp, ist, fst, P, Q, V, A, F, Fc, out, trk, limit, rec, tot, outbuf)
 
 
@@ -137,10 +141,10 @@ def unit_sensors_c(ctx_address, t, h):
     """:func:`~track.unit_step.unit_sensors` on the arrays of ``ctx`` (``t``, ``h`` unused: the shim's
     signature for a step function)."""
     ctx = carray(ctx_address, (SLOT * len(SPEC),), np.int64)
-    sens = (_i1(ctx, 74), _i1(ctx, 75), _i1(ctx, 76), _f1(ctx, 77), _f1(ctx, 78), _f1(ctx, 79), _f1(ctx, 80),
-            _f2(ctx, 81), _f1(ctx, 82))
-    outbuf = _f1(ctx, 73)
-    return unit_sensors(_i1(ctx, 1), _f2(ctx, 46), _f2(ctx, 47), _f2(ctx, 48), sens, outbuf, _f1(ctx, 61).size)
+    sens = (_i1(ctx, 84), _i1(ctx, 85), _i1(ctx, 86), _f1(ctx, 87), _f1(ctx, 88), _f1(ctx, 89), _f1(ctx, 90),
+            _f2(ctx, 91), _f1(ctx, 92))
+    outbuf = _f1(ctx, 83)
+    return unit_sensors(_i1(ctx, 1), _f2(ctx, 56), _f2(ctx, 57), _f2(ctx, 58), sens, outbuf, _f1(ctx, 71).size)
 
 
 def unit_step_address() -> int:

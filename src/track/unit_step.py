@@ -11,8 +11,6 @@ bit — and hands everything else back to Python *before changing anything*:
 
 * a step size other than the engine's, a non-finite input, a wheel off the panel (Python
   reports them);
-* a wheel entering a rail element whose data are not loaded (:data:`UNIT_ELEMENT`: the caller
-  loads them, :meth:`UnitSteps.load_elements`, and calls again);
 * a failing step (no convergence) or a diverged force (Python repeats the step, which fails
   the same way, and reports it);
 * a record row beyond the reserved rows.
@@ -29,9 +27,10 @@ import numpy as np
 
 from .ballast import DAMPING_ONSET
 from .fused import EngineBuffers, _call_kernel, _track_outputs
-from .kernel import C_MAXPASS, C_NEWTON, C_PASSES, C_SOLVES, NEED_ELEMENT, OK, _njit, record_row
+from .kernel import C_MAXPASS, C_NEWTON, C_PASSES, C_SOLVES, OK, _njit, record_row
 
-UNIT_TOOK, UNIT_PYTHON, UNIT_ELEMENT = 0, 1, 2   # unit_step's answers: done; Python takes it; load elements
+UNIT_TOOK, UNIT_PYTHON = 0, 1   # unit_step's answers: done; Python takes it (the shim's 2, "load data first",
+                                # is not used: the kernel loads a rail element's data itself)
 # the integer state ``ist``: state buffer, track steps, record rows written / reserved, record every,
 # extrapolated force (0/1), steps since the last write-back, inputs at the step's start (0/1: extrapolated),
 # sensor values not yet evaluated at the current state (0/1)
@@ -48,9 +47,9 @@ def unit_step(t, h, inp, ist, fst, P, Q, V, A, F, Fc, out, trk, limit, rec, tot,
     (m each; end-of-step values, or start-of-step values extrapolated with the engine's speed and vz
     when ``ist[I_START]``) [m, m, m/s].
 
-    Returns :data:`UNIT_TOOK` (state buffer ``ist[I_C]`` and ``outbuf`` hold the step's end),
-    :data:`UNIT_ELEMENT` (load ``P``'s ``ent[1]`` entries and call again) or :data:`UNIT_PYTHON`
-    (let the Python path take this step); in the last two cases nothing of the state changed.
+    Returns :data:`UNIT_TOOK` (state buffer ``ist[I_C]`` and ``outbuf`` hold the step's end) or
+    :data:`UNIT_PYTHON` (let the Python path take this step; nothing of the state changed, but the
+    element data of the wheels' elements may have been loaded, as that step would).
     The other arguments: see :class:`UnitSteps`.
     """
     hh = fst[F_H]
@@ -80,8 +79,6 @@ def unit_step(t, h, inp, ist, fst, P, Q, V, A, F, Fc, out, trk, limit, rec, tot,
     cnt[:] = 0
     c = ist[I_C]
     status, change = _call_kernel(P, Q, V, A, F, Fc, c, xw, zc, out)
-    if status == NEED_ELEMENT:
-        return UNIT_ELEMENT
     if status != OK:
         return UNIT_PYTHON
     for i in range(m):
@@ -226,12 +223,6 @@ class UnitSteps(EngineBuffers):
         ist[I_STEPS] = 0
         return steps
 
-    def load_elements(self) -> None:
-        """Load the rail elements the wheels entered (after :data:`UNIT_ELEMENT`)."""
-        cc = self.cc
-        for i in np.flatnonzero(cc.ent[0] != cc.ent[1]).tolist():
-            cc._load(i, int(cc.ent[1, i]))
 
-
-__all__ = ["NO_SENSORS", "OUTPUTS", "UNIT_ELEMENT", "UNIT_PYTHON", "UNIT_TOOK", "UnitSteps", "sensor_read",
+__all__ = ["NO_SENSORS", "OUTPUTS", "UNIT_PYTHON", "UNIT_TOOK", "UnitSteps", "sensor_read",
            "unit_sensors", "unit_step"]
