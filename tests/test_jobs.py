@@ -350,3 +350,38 @@ def test_runs_via_fmus_leave_nothing_in_the_temp_folder(tmp_path):
                           text=True)
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in tmp.iterdir()) == []
+
+
+_END_PROCESS = """
+import atexit, sys, threading, time
+from orchestrator.cli import _end_process
+
+atexit.register(lambda: open(sys.argv[1], "w").write("handlers ran"))
+sys.stdout.write("unflushed line")                  # no newline: still in the buffer
+if sys.argv[2] == "thread":                         # a library's non-daemon thread still running
+    threading.Thread(target=time.sleep, args=(0.3,)).start()
+status = _end_process(int(sys.argv[3]))
+sys.stdout.write(f" returned {status}")
+sys.exit(status)
+"""
+
+
+@pytest.mark.parametrize("thread", ["none", "thread"])
+def test_the_console_ends_the_process_after_its_exit_handlers(tmp_path, thread):
+    """``turnout``'s console entry ends the process without the interpreter's teardown
+    (orchestrator.cli._end_process): the exit status is the command's, the atexit handlers have run
+    and the standard streams are flushed; with a non-daemon thread still running it returns and the
+    process exits normally (the thread is joined), with the same status and handlers."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "end.py"
+    script.write_text(_END_PROCESS)
+    for status in (0, 2):
+        marker = tmp_path / f"handlers_{status}"
+        done = subprocess.run([sys.executable, str(script), str(marker), thread, str(status)],
+                              capture_output=True, text=True)
+        assert done.returncode == status, done.stderr
+        assert marker.read_text() == "handlers ran"
+        returned = f" returned {status}" if thread == "thread" else ""
+        assert done.stdout == "unflushed line" + returned
