@@ -1166,51 +1166,61 @@ def element_rows(bodies: list, elements: list) -> dict:
     for b in bodies:
         order.setdefault(b.name, b)
     names = list(order)
-    first = {}
-    nrows, row_of = 1, {}
-    for name in names:
-        b = order[name]
-        first[name] = nrows
-        ids = {r for e in range(_element_count(b)) for r in _row_ids(b, e)}
-        nrows += max(ids) + 1
+    per = [_body_rows(order[nm]) for nm in names]
+    first = np.cumsum([1] + [p["rload"].shape[0] for p in per])
     nrmax = max(order[nm].rom.nr for nm in names)
-    rload = np.zeros((nrows, nrmax))
-    rbody = np.zeros(nrows, np.int64)
+    rload = np.zeros((first[-1], nrmax))
+    rbody = np.zeros(first[-1], np.int64)
     bgd = np.zeros((len(names), nrmax), np.int64)
     bnr = np.zeros(len(names), np.int64)
-    for bi, name in enumerate(names):
-        b, o = order[name], first[name]
-        bgd[bi, :b.rom.nr] = b.gdofs
-        bnr[bi] = b.rom.nr
-        for e in range(_element_count(b)):
-            rows = b.load_rows(e)
-            for j, r in enumerate(_row_ids(b, e)):
-                rload[o + r, :rows.shape[1]] = rows[j]
-                rbody[o + r] = bi
-        row_of[name] = o
-    width = max(len(_ahead_rows(order[nm], 0)) for nm in names)
+    for bi, (name, p) in enumerate(zip(names, per)):
+        b, o = order[name], first[bi]
+        nr = b.rom.nr
+        bgd[bi, :nr], bnr[bi] = b.gdofs, nr
+        rload[o:first[bi + 1], :nr] = p["rload"]
+        rbody[o:first[bi + 1]] = bi
     E = len(bodies)
+    width = max(p["ahead"].shape[1] for p in per)
     erow = np.zeros((E, 4), np.int64)
     eahead = np.full((E, width), -1, np.int64)
     eR = np.zeros((E, 4, 4))
-    for k, (b, e) in enumerate(zip(bodies, elements)):
-        o = row_of[b.name]
-        ids = _row_ids(b, e)
-        erow[k, :len(ids)] = [o + r for r in ids]
-        ahead = _ahead_rows(b, e)
-        eahead[k, :len(ahead)] = [o + r for r in ahead]
-        eR[k] = b.residual_block(e)
-    key = tuple((nm, first[nm]) for nm in names) + (nrows,)
+    which = np.array([names.index(b.name) for b in bodies], np.int64)
+    el = np.asarray(elements, np.int64)
+    for bi, p in enumerate(per):
+        k = np.flatnonzero(which == bi)
+        ids, ahead = p["ids"][el[k]], p["ahead"][el[k]]
+        erow[k] = np.where(ids >= 0, ids + first[bi], 0)
+        eahead[k, :ahead.shape[1]] = np.where(ahead >= 0, ahead + first[bi], -1)
+        eR[k] = p["R"][el[k]]
+    key = tuple(zip(names, first[:-1].tolist())) + (int(first[-1]),)
     return dict(erow=erow, eahead=eahead, eR=eR, rload=rload, rbody=rbody, bgd=bgd, bnr=bnr, key=key)
 
 
-def _ahead_rows(body, e: int) -> list:
-    """Row ids of elements ``e .. e + INFLUENCE_AHEAD - 1`` of ``body`` (within it), each once, in order."""
-    out: dict = {}
-    for el in range(e, min(e + INFLUENCE_AHEAD, _element_count(body))):
-        for r in _row_ids(body, el):
-            out.setdefault(r)
-    return list(out)
+def _body_rows(body) -> dict:
+    """One body's part of :func:`element_rows`, by local row id (computed once per reduced body: kept
+    in ``body.rom.kernel_rows``, which a process reuses across the builds of a diagnosis's variants):
+    ``rload`` (rows, nr) the load vectors, ``ids`` int64[ne, 4] each element's rows (-1 beyond),
+    ``ahead`` int64[ne, AH] the rows of elements e .. e + INFLUENCE_AHEAD - 1, each once, in order
+    (-1 after), ``R`` (ne, 4, 4) the elements' residual flexibility [m/N]."""
+    cache = body.rom.kernel_rows
+    hit = cache.get(INFLUENCE_AHEAD)
+    if hit is not None:
+        return hit
+    ne = _element_count(body)
+    ids = np.full((ne, 4), -1, np.int64)
+    rows_of = [_row_ids(body, e) for e in range(ne)]
+    rload = np.zeros((max(max(r) for r in rows_of) + 1, body.rom.nr))
+    for e, rows in enumerate(rows_of):
+        ids[e, :len(rows)] = rows
+        rload[rows] = body.load_rows(e)
+    ahead_of = [list(dict.fromkeys(r for el in range(e, min(e + INFLUENCE_AHEAD, ne)) for r in rows_of[el]))
+                for e in range(ne)]
+    ahead = np.full((ne, max(len(a) for a in ahead_of)), -1, np.int64)
+    for e, a in enumerate(ahead_of):
+        ahead[e, :len(a)] = a
+    R = np.array([body.residual_block(e) for e in range(ne)]).reshape(ne, 4, 4)
+    cache[INFLUENCE_AHEAD] = hit = dict(rload=rload, ids=ids, ahead=ahead, R=R)
+    return hit
 
 
 class CompiledContacts:

@@ -62,6 +62,8 @@ class ReducedBody:
     # with the reduced body, which a process reuses across builds (the variants of a diagnosis), not with
     # the Body of one build (2376 blocks of 4200 were computed again in six void variants' runs, 8 ms a run)
     residual_blocks: dict = field(default_factory=dict, repr=False, compare=False)
+    # the compiled step's element data of the body (track.kernel.element_rows), kept here for the same reason
+    kernel_rows: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def nb(self) -> int:
