@@ -285,9 +285,17 @@ def calibrate(base_path: str | os.PathLike, measured: str | os.PathLike | None, 
     check_sizes(n1, n2, polish)
     scenario, raw, plist = prepare(base_path, out, params, n1)
     objective = objective_of(measured, scenario, base_path, run_fn, polish_fn)
-    setup = Setup(base_path, out, Runs(out / BASE_FILE, raw, plist, workers, scheduler, progress), objective, n1, n2,
-                  seed, tuple(transforms), polish)
-    return _finish(setup, run_stages(setup), t_start)
+    # one executor for every stage: a local pool's workers start (imports, numba's set-up, the kernel's
+    # load) once instead of once per stage, five times (benchmarks/RESULTS.md, 2026-11-27)
+    from orchestrator.sweeps.executors import make_executor
+
+    executor = make_executor(workers, scheduler)
+    try:
+        setup = Setup(base_path, out, Runs(out / BASE_FILE, raw, plist, workers, scheduler, progress, executor),
+                      objective, n1, n2, seed, tuple(transforms), polish)
+        return _finish(setup, run_stages(setup), t_start)
+    finally:
+        executor.shutdown()
 
 
 def _finish(setup: Setup, found: Outcome, t_start: float) -> CalibrationResult:

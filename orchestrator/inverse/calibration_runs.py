@@ -175,6 +175,9 @@ class Runs:
         Dask scheduler address.
     progress : bool
         Progress bars of the design stages.
+    executor : concurrent.futures.Executor or None
+        One executor for every stage's runs (:func:`orchestrator.inverse.calibrate.calibrate` makes it
+        and shuts it down: the workers start once, not once per stage); None: each stage makes its own.
     """
 
     snapshot: Path
@@ -183,6 +186,7 @@ class Runs:
     workers: int | None
     scheduler: str | None
     progress: bool
+    executor: Any = None
 
     def sweep(self, variations: list[dict], out: Path, what: str, run_fn: Callable, *, progress: bool,
               executor=None):
@@ -195,7 +199,8 @@ class Runs:
 
         try:
             res = run_sweep(self.snapshot, variations, out, run_fn=measured_by_value(run_fn), workers=self.workers,
-                            scheduler=self.scheduler, progress=progress, executor=executor)
+                            scheduler=self.scheduler, progress=progress,
+                            executor=self.executor if executor is None else executor)
         except SweepIncomplete as exc:
             raise CalibrationIncomplete(f"calibration {what}: {exc}") from None
         if res.failed:
@@ -261,7 +266,8 @@ def polish(runs: Runs, starts: dict, out: Path, polish_fn: Callable, max_nfev: i
     t0 = time.perf_counter()
     found: dict[bytes, tuple[float, dict]] = {}  # point -> (J, result row) of every polish run
     bar = tqdm(desc="polish", unit="run", disable=not runs.progress)
-    executor = make_executor(runs.workers, runs.scheduler)
+    own = runs.executor is None
+    executor = make_executor(runs.workers, runs.scheduler) if own else runs.executor
     fits, per_start = {}, {}
     names = [p.name for p in runs.params]
     try:
@@ -277,7 +283,8 @@ def polish(runs: Runs, starts: dict, out: Path, polish_fn: Callable, max_nfev: i
                                 "iterations": fit.batches}
     finally:
         bar.close()
-        executor.shutdown()
+        if own:
+            executor.shutdown()
     label = min(fits, key=lambda k: fits[k].cost)
     fit = fits[label]
     j, row = found[fit.p.tobytes()]
