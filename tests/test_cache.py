@@ -23,12 +23,17 @@ def test_reduced_bodies_from_the_disk_cache_are_the_reduced_bodies(tmp_path):
     """A new process (here: the memory cache cleared) reads the reduced bodies from ``cache_dir``
     instead of reducing them again, and gets the same model to the bit (consistency check:
     the arrays are stored, not recomputed); an unreadable file is reduced again and rewritten;
-    a folder that cannot be written to only costs the reductions."""
+    a folder that cannot be written to only costs the reductions; a body of the older .npz format is
+    removed when a body is written."""
     import numpy as np
 
     lp = LayoutParams(type="plain", sleepers=8)
     clear_rom_cache()
+    (tmp_path / "roms").mkdir()
+    stale = tmp_path / "roms" / "rom-0000-0000.npz"     # a body in the format before 2026-11-27: removed
+    stale.write_bytes(b"PK")
     a = build_track(TrackParams(layout=lp), cache_dir=tmp_path)
+    assert not stale.exists()
     files = sorted((tmp_path / "roms").glob(f"rom-*{ROM_SUFFIX}"))
     assert a.stats.reductions >= 1 and len(files) == a.stats.reductions
     clear_rom_cache()

@@ -367,8 +367,8 @@ def _rom_save(rom: ReducedBody, path: Path) -> None:
                 fh.write(v.tobytes())
         os.replace(tmp, path)
         files = sorted(path.parent.glob(f"rom-*{ROM_SUFFIX}"), key=lambda f: f.stat().st_mtime)
-        for old in files[:max(0, len(files) - ROM_DISK_MAX)]:
-            old.unlink(missing_ok=True)
+        for old in files[:max(0, len(files) - ROM_DISK_MAX)] + list(path.parent.glob("rom-*.npz")):
+            old.unlink(missing_ok=True)   # and the .npz files of the format before 2026-11-27, never read now
     except OSError:
         pass
 
