@@ -134,7 +134,7 @@ def stage_costs(sc, repeat=1000):
             tc.model.f_gravity, *cc._K, *cc._C, qp, vp, sw, y, rhs), repeat),
         "LDL^T solve": _best_us(lambda: K.ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, rhs, acc_lin, unit), repeat),
         "corrector (4 wheels x 4 rows)": _best_us(lambda: K._corrector(
-            a1, bh2, gh, qp, vp, acc_lin, Fn, it.Fc, cc.W, cc._rows[7], cc.zrow, new[2], new[0], new[1]), repeat),
+            a1, bh2, gh, qp, vp, acc_lin, Fn, it.Fc, cc.W, cc.Zr, cc.zrow, new[2], new[0], new[1]), repeat),
     }
 
 

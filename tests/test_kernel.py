@@ -236,7 +236,7 @@ def test_the_kernel_loads_the_element_a_wheel_enters(monkeypatch):
     for k in range(40):   # 0.12 m: a few elements
         tc.do_step(np.array([x0, x0]) + 3e-3 * k, np.zeros(2), np.zeros(2))
     cc, model = tc._compiled, tc.model
-    Zr = cc._rows[7]
+    Zr = cc.Zr
     A = tc.integ.step_matrix.tocsc()
     assert len(set(cc.ent[0].tolist())) == 2
     for i in range(2):

@@ -447,7 +447,8 @@ def _csr_matvec_sub(Xp, Xi, Xx, x, out):
 
 
 def compressed_rows(X: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(indptr, indices, data)`` of X by rows, columns ascending: uint32, uint32, float64 (:func:`_csr_matvec_sub`)."""
+    """``(indptr, indices, data)`` of X by rows, columns ascending: uint32, uint32, float64
+    (:func:`_csr_matvec_sub`)."""
     X = sp.csr_matrix(X)
     X.sort_indices()
     return (_indices(X.indptr, "row pointers"), _indices(X.indices, "column indices"),
@@ -541,6 +542,16 @@ def _load_entry(i, k, erow, eahead, eR, rload, rbody, bgd, bnr, Zr, zhave, zwork
     nr[i] = nb
     fresh[i] = 1
     ent[0, i] = k
+
+
+@_njit
+def _enter_elements(ent, erow, eahead, eR, rload, rbody, bgd, bnr, Zr, zhave, zwork, perm, Lp, Li, Lx, d,
+                    T, gd, nr, R, zrow, fresh, cnt):
+    """Load the element data of each wheel whose table entry changed (``ent[1]`` from :func:`_locate_wheels`)."""
+    for i in range(ent.shape[1]):
+        if ent[0, i] != ent[1, i]:
+            _load_entry(i, ent[1, i], erow, eahead, eR, rload, rbody, bgd, bnr, Zr, zhave, zwork, perm, Lp, Li, Lx,
+                        d, T, gd, nr, R, zrow, fresh, ent, cnt)
 
 
 # ------------------------------------------------------------------------------- step stages
@@ -920,99 +931,74 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
                  yw, tg, tz, tc, chw):
     """One HHT-alpha step with Hertz contacts solved implicitly (TrackIntegrator.step_contacts).
 
-    Parameters (m wheels, n dofs, nb ballast bushings, E table entries, nrmax the most
-    coordinates of a running body)
+    Parameters (m wheels, n dofs, nb ballast bushings, E table entries, nrmax the most coordinates of a
+    running body)
     ----------
-    par : float64[N_PAR]
-        Indexed by the ``P_*`` constants: h [s], alpha, beta, gamma, motion safety, motion
-        floor [m], Hertz constant [N/m^1.5], contact tol [N], contact rel tol, force tol [N],
-        rel force tol, max passes, max Newton sweeps, beta_s [s] (stiffness-proportional
-        damping), crossing x_tcp, x_transfer [m], impact angle [rad], joint x [m], angle [rad].
-    cnt : int64[4]
-        Work counters, incremented (solves, passes, contact Newton sweeps, most passes).
-    q0, v0, acc0, F0 : float64[n]
-        State at the step's start (F0: the right-hand side of the last step).
-    Fc0 : float64[m]
-        Contact forces of the last step [N] (the first guess).
-    fgrav : float64[n]
-    Kp, Ki, Kx / Cp, Ci, Cx : compressed rows (:func:`compressed_rows`) of the stiffness (with the linear ballast) and of
-        ``C_t - beta_s K_t`` (the damping not proportional to K).
-    D, bk, bc, bgap : ballast dofs, stiffness [N/m], damping [N s/m], gaps [m].
-    Zb : float64[nb, n], have : uint8[nb]
-        Ballast influence rows ``A^{-1} e_D`` (filled on demand).
+    par : float64[N_PAR]   by the ``P_*`` constants: h [s], alpha, beta, gamma, motion safety, motion floor [m],
+        Hertz constant [N/m^1.5], contact tol [N] and rel tol, force tol [N] and rel tol, max passes, max Newton
+        sweeps, beta_s [s] (stiffness-proportional damping), crossing x_tcp, x_transfer [m], impact angle [rad],
+        joint x [m], angle [rad].
+    cnt : int64[4]         work counters, incremented (solves, passes, contact Newton sweeps, most passes).
+    q0, v0, acc0, F0 : float64[n]   state at the step's start (F0: the right-hand side of the last step).
+    Fc0 : float64[m]       contact forces of the last step [N] (the first guess).  fgrav : float64[n].
+    Kp, Ki, Kx / Cp, Ci, Cx : compressed rows (:func:`compressed_rows`) of the stiffness (with the linear
+        ballast) and of ``C_t - beta_s K_t`` (the damping not proportional to K).
+    D, bk, bc, bgap : ballast dofs, stiffness [N/m], damping [N s/m], gaps [m]; Zb : float64[nb, n], have :
+        uint8[nb]: their influence rows ``A^{-1} e_D`` (filled on demand).
     perm, Lp, Li, Lx, dd : the LDL^T factor of the step matrix (:class:`LDLFactor`).
     x, zw : float64[m]     wheel track coordinates and vertical positions at the step's end [m].
-    wside : int64[m]       side of each wheel (0 left, 1 right).
-    ts, etab, ec, es : int64[3], float64[E, 3], float64[E, 4, 4], int64[E]
-        The element tables (:func:`_locate_wheels`).
+    wside, ts, etab, ec, es : each wheel's side (0 left, 1 right) and the element tables (:func:`_locate_wheels`).
     ent : int64[2, m]      table entry loaded for each wheel / wanted (written).
-    erow, eahead, eR, rload, rbody, bgd, bnr : the entries' element data (:func:`element_rows`).
-    Zr : float64[NR, n], zhave : uint8[NR]
-        Influence rows ``A^{-1} r`` of the running bodies' load rows (row 0 zero), which are solved
-        (filled on demand, :func:`_solve_rows`); shared by every step on the same factor.
-    zwork : float64[3 n AH]   workspace of :func:`_solve_rows` (AH: the width of ``eahead``).
-    T : float64[m, 4, nrmax], gd : int64[m, nrmax], nr : int64[m]
-        Load rows of each wheel's element on its body's coordinates ``gd`` (written on entry).
-    R : float64[m, 4, 4]   residual flexibility of the element [m/N] (written on entry).
-    zrow : int64[m, 4]     rows of ``Zr`` of each wheel's load rows (written on entry).
-    E : float64[m, m, 4, 4], fresh : uint8[m]
-        Coupling blocks between the wheels' elements (:func:`_coupling_blocks`) and which
-        wheels' element data were loaded since they were computed.
-    q1, v1, acc1, F1 : float64[n], Fc1 : float64[m], out : float64[m, 4]   outputs.
-    W : float64[m, 4], surf : float64[m, 2]   shape-function values, surface heights [m]
-        (written; ``surf`` read where the surface is SURF_GIVEN).
-    wts : float64[m, nrmax], work, iwork : float64, int64 (:func:`work_sizes`)   workspace.
+    erow, eahead, eR, rload, rbody, bgd, bnr : the entries' element data (:func:`element_rows`); Zr : float64[NR,
+        n], zhave : uint8[NR]: the influence rows ``A^{-1} r`` of their load rows (row 0 zero; solved on demand,
+        shared by every step on the same factor); zwork : float64[3 n AH] (:func:`_solve_rows`).
+    T, gd, nr, R, zrow : float64[m, 4, nrmax], int64[m, nrmax], int64[m], float64[m, 4, 4], int64[m, 4]: each
+        wheel's element: load rows on its body's coordinates ``gd``, residual flexibility [m/N], rows of ``Zr``
+        (written when it enters, :func:`_load_entry`).
+    E, fresh : float64[m, m, 4, 4], uint8[m]   coupling blocks of the wheels' elements (:func:`_coupling_blocks`)
+        and which wheels' element data were loaded since they were computed.
+    q1, v1, acc1, F1 : float64[n], Fc1 : float64[m], out : float64[m, 4]   outputs; wts : float64[m, nrmax], work,
+        iwork : float64, int64 (:func:`work_sizes`): workspace.
+    W, surf : float64[m, 4], float64[m, 2]   shape-function values, surface heights [m] (written; ``surf`` read
+        where the surface is SURF_GIVEN).
     yw : float64[m]        lateral offset of each wheel towards its field side [m] (contact tables).
-    tg, tz, tc : float64[nt, 6], float64[nt, 2, NX, NY] (twice)
-        Contact tables (:func:`track.contact.table_surface`; codes ``SURF_TABLE + t``).
-    chw : float64[m, 2]    Hertz constant of each wheel's surfaces (written) [N/m^1.5].
+    tg, tz, tc : float64[nt, 6], float64[nt, 2, NX, NY] (twice)   contact tables (:func:`track.contact.table_surface`;
+        codes ``SURF_TABLE + t``); chw : float64[m, 2]: the Hertz constant of each wheel's surfaces (written).
 
-    Returns
-    -------
-    status : int
-        OK; PASSES_FAILED or NEWTON_FAILED (the outputs are then meaningless).
-    change : float
-        Last force change between passes [N].
+    Returns ``(status, change)``: OK, PASSES_FAILED or NEWTON_FAILED (the outputs then meaningless); the last
+    force change between passes [N].
     """
     if not _locate_wheels(par, x, yw, wside, ts, etab, ec, es, ent, W, surf, tg, tz, tc, chw):
-        for i in range(x.size):
-            if ent[0, i] != ent[1, i]:
-                _load_entry(i, ent[1, i], erow, eahead, eR, rload, rbody, bgd, bnr, Zr, zhave, zwork,
-                            perm, Lp, Li, Lx, dd, T, gd, nr, R, zrow, fresh, ent, cnt)
+        _enter_elements(ent, erow, eahead, eR, rload, rbody, bgd, bnr, Zr, zhave, zwork, perm, Lp, Li, Lx, dd,
+                        T, gd, nr, R, zrow, fresh, cnt)
     h, a_, b, g = par[P_H], par[P_ALPHA], par[P_BETA], par[P_GAMMA]
-    safety, floor, beta_s = par[P_SAFETY], par[P_FLOOR], par[P_BETA_S]
-    ctol0, crel, ftol0, frel = par[P_CTOL], par[P_CREL], par[P_FTOL], par[P_FREL]
-    max_pass, max_newton = int(par[P_MAXPASS]), int(par[P_MAXNEWTON])
-    n = q0.size
-    m = zw.size
-    nbal = D.size
+    n, m, nbal = q0.size, zw.size, D.size
     bh2, gh, a1 = b * h * h, g * h, 1.0 + a_
     qp, vp, rhs, y, acc_lin, sw, unit, Fn, wlin, wpred, res, cpl, G, corr, newc = _workspace(work, n, m, nbal)
     cidx = iwork
-
-    _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, Cx, qp, vp, sw, y, rhs)
-    nc = _ballast_candidates(h, safety, floor, q0, v0, acc0, D, bgap, cidx)
+    _predict(h, a_, b, g, par[P_BETA_S], q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, Cx, qp, vp, sw, y, rhs)
+    nc = _ballast_candidates(h, par[P_SAFETY], par[P_FLOOR], q0, v0, acc0, D, bgap, cidx)
     _ballast_first_guess(a1, bh2, gh, nc, cidx, D, bk, bc, bgap, qp, vp, acc0, corr, rhs)
     fmax = _wheel_loads(a1, W, T, gd, nr, Fc0, Fn, wts, rhs)
     ldl_solve(perm, Lp, Li, Lx, dd, rhs, acc_lin, unit)
     cnt[C_SOLVES] += 1
     _coupling_blocks(T, gd, nr, Zr, zrow, fresh, E)
     _contact_coupling(a1, bh2, W, R, gd, nr, wts, E, qp, G, res, wpred)
-    ctol = ctol0 + crel * fmax
-    ftol = ftol0 + frel * fmax
+    ctol = par[P_CTOL] + par[P_CREL] * fmax
+    ftol0, ftol = par[P_FTOL], par[P_FTOL] + par[P_FREL] * fmax
 
     # modified-Newton passes: they repeat only while a ballast bushing changes state
-    status, change, it = _passes(max_pass, chw, ctol, ftol, ftol0, max_newton, a1, bh2, gh, wpred, acc_lin, wts,
-                                 gd, nr, G, res, zw, surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx, D, bk, bc, bgap,
-                                 qp, vp, W, Zr, zrow, corr, newc, Zb, have, perm, Lp, Li, Lx, dd, unit, y)
+    status, change, it = _passes(int(par[P_MAXPASS]), chw, ctol, ftol, ftol0, int(par[P_MAXNEWTON]), a1, bh2, gh,
+                                 wpred, acc_lin, wts, gd, nr, G, res, zw, surf, Fc0, Fn, wlin, cpl, out, cnt, nc, cidx,
+                                 D, bk, bc, bgap, qp, vp, W, Zr, zrow, corr, newc, Zb, have, perm, Lp, Li, Lx, dd,
+                                 unit, y)
     if status != OK:
         return status, change
 
     _corrector(a1, bh2, gh, qp, vp, acc_lin, Fn, Fc0, W, Zr, zrow, acc1, q1, v1)
     _end_forces(fgrav, nc, cidx, D, corr, Fn, wts, gd, nr, F1, Fc1, out)
     cnt[C_PASSES] += it
-    if it > cnt[C_MAXPASS]:
-        cnt[C_MAXPASS] = it
+    cnt[C_MAXPASS] = max(cnt[C_MAXPASS], it)
     return OK, change
 
 
@@ -1293,8 +1279,9 @@ class CompiledContacts:
             shared = sh.ldl_rows[rows["key"]] = (np.zeros((rows["rload"].shape[0], n)),
                                                  np.zeros(rows["rload"].shape[0], np.uint8))
             shared[1][0] = 1
+        self.Zr, self.zhave = shared            # the influence rows A^{-1} r and which are solved
         self._rows = (rows["erow"], rows["eahead"], rows["eR"], rows["rload"], rows["rbody"], rows["bgd"],
-                      rows["bnr"], *shared, np.empty(3 * n * rows["eahead"].shape[1]))
+                      rows["bnr"], self.Zr, self.zhave, np.empty(3 * n * rows["eahead"].shape[1]))
         self.yw = np.zeros(m)
         self.chw = np.zeros((m, 2))
         self.wside = np.array([("left", "right").index(s) for s in self.sides], np.int64)
