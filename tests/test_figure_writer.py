@@ -41,3 +41,26 @@ def test_figures_are_written_and_failures_reported(tmp_path, layout, background)
     # no Python process that has imported numpy and matplotlib stays under (measured ~150 MB), so a
     # value read from the wrong place (kB taken as MB would be ~1e5, bytes ~1e8) or a zero fails
     assert (w.peak_rss_mb is not None and 20.0 < w.peak_rss_mb < 5000.0) if background else w.peak_rss_mb is None
+
+
+_PROBE = """
+import atexit, sys
+atexit.register(open, {handler!r}, "w")            # an exit handler registered after the warm-up's
+class _Probe:
+    def __del__(self):                              # runs when the interpreter tears its modules down
+        open({teardown!r}, "w").close()
+sys.modules["__main__"].probe = _Probe()
+"""
+
+
+def test_the_figure_process_ends_after_its_exit_handlers_without_teardown(tmp_path):
+    """The figure process ends at once after its exit handlers (figure_writer._end_at_once): an
+    ``atexit`` handler registered in it runs; an object that only the interpreter's teardown would
+    free is never freed. close() returns once the process has ended (it joins it), so both files are
+    settled when it returns."""
+    w = FigureWriter(background=True)
+    code = _PROBE.format(handler=str(tmp_path / "handler"), teardown=str(tmp_path / "teardown"))
+    w.submit("probe", exec, code)
+    assert w.close() == []
+    assert (tmp_path / "handler").exists()
+    assert not (tmp_path / "teardown").exists()

@@ -191,6 +191,30 @@ def test_summary_counters_report_steps_and_phase_walls(default_runs):
     assert parts <= summary["wall_seconds"]["job_total"] * (1 + 1e-9)
 
 
+def test_the_run_post_processes_with_one_blas_thread_and_gives_the_threads_back(tmp_path, monkeypatch):
+    """While the figure process draws, run_scenario's process keeps one BLAS thread
+    (jobs.RUN_BLAS_THREADS): the post-processing runs under it, and the caller's limit (two here,
+    whatever the machine) is back once the job returns."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from orchestrator.results import jobs
+
+    seen = []
+    post = jobs._post_process
+
+    def spy(*args, **kwargs):
+        seen.append({i["internal_api"]: i["num_threads"] for i in threadpool_info()})
+        return post(*args, **kwargs)
+
+    monkeypatch.setattr(jobs, "_post_process", spy)
+    with threadpool_limits(limits=2):
+        assert main(["run", str(PLAIN_SCENARIO), "--out", str(tmp_path / "r"), "--no-progress", "--backend",
+                     "inprocess", *[a for s in QUICK for a in ("--set", s)]]) == 0
+        after = {i["internal_api"]: i["num_threads"] for i in threadpool_info()}
+    assert seen and set(seen[0].values()) == {1}, seen
+    assert set(after.values()) == {2}, after
+
+
 def test_in_process_summary_counters_have_the_track_counters(tmp_path):
     out = tmp_path / "ip"
     assert main(["run", str(PLAIN_SCENARIO), "--out", str(out), "--no-progress", "--backend", "inprocess",
@@ -385,3 +409,18 @@ def test_the_console_ends_the_process_after_its_exit_handlers(tmp_path, thread):
         assert marker.read_text() == "handlers ran"
         returned = f" returned {status}" if thread == "thread" else ""
         assert done.stdout == "unflushed line" + returned
+
+
+def test_only_a_one_command_process_freezes_its_imports():
+    """``turnout``'s console entry marks the process as running one command (cli._ONE_COMMAND): the
+    objects of the command's imports are then frozen out of the collector's passes (gc.freeze); a
+    process that calls main() and goes on (tests, notebooks) freezes nothing."""
+    import subprocess
+    import sys
+
+    probe = ("import gc, sys; from orchestrator import cli; cli._ONE_COMMAND = sys.argv[1] == 'one'; "
+             "cli._jobs(); print(gc.get_freeze_count())")
+    frozen = {kind: int(subprocess.run([sys.executable, "-c", probe, kind], capture_output=True, text=True,
+                                       check=True).stdout) for kind in ("one", "library")}
+    assert frozen["library"] == 0
+    assert frozen["one"] > 10_000   # numpy, scipy, numba and the model's modules: ~1e5 objects

@@ -29,13 +29,31 @@ START_METHOD = "spawn"   # as the sweeps' workers: forking a process holding BLA
 
 
 def _warm_up() -> None:
-    """Import what drawing needs (in the figure process, while the co-simulation runs)."""
+    """Import what drawing needs (in the figure process, while the co-simulation runs); the process
+    will end without the interpreter's teardown (:func:`_end_at_once`)."""
+    import atexit
+    atexit.register(_end_at_once)   # first: the handlers registered later (matplotlib's) run before it
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot  # noqa: F401
 
     import orchestrator.results.plots  # noqa: F401
     import orchestrator.results.plots_layout  # noqa: F401
+
+
+def _end_at_once() -> None:
+    """The figure process's last exit handler: flush the standard streams and end the process.
+
+    Every figure file is closed by then (``savefig``), and the worker has sent its last message.
+    The teardown this skips frees every object of matplotlib and the plotting modules one by one:
+    0.1-0.17 s that :meth:`FigureWriter.close` waited for, at the end of ``turnout run``
+    (2026-11-27, benchmarks/RESULTS.md). As ``orchestrator.cli._end_process`` does for the main
+    process; the status is 0, as a worker that ran its tasks exits (a figure's failure comes back
+    with its result)."""
+    import sys
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def _peak_rss_mb() -> float:

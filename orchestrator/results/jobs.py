@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from threadpoolctl import threadpool_limits
+
 from orchestrator.cosim.master import merge_columns
 from orchestrator.cosim.sensing import read_sensors, sensor_columns
 from orchestrator.inputs.errors import UserInputError
@@ -38,6 +40,10 @@ STATE_KEYS = ("t", "q", "v", "a")   # what --save-states writes of the track rec
 # their mantissas are noise, lzf+shuffle saved 6 % and gzip-1+shuffle 11 % at 2.5x and 5x the write time.
 H5_COMPRESSION = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
 H5_COMPRESS_MIN = 64      # elements: smaller datasets are stored as they are
+# BLAS threads of run_scenario's process once the model is built: one, as the other core draws the figures
+# (figure_writer). With OpenBLAS's two threads the default scenario's post-processing (small products on
+# blocks of states) took 0.26 s instead of 0.10 s, and the figures beside it were slower (2026-11-27, RESULTS.md).
+RUN_BLAS_THREADS = 1
 
 
 def _progress_bar(enabled: bool, total: int, desc: str):
@@ -77,23 +83,24 @@ def run_scenario(scenario, out_dir: Path, progress: bool = True, backend: str = 
         out_dir = prepare_out_dir(out_dir)   # warns when it held an earlier run's results
         model = track_model(scenario.track)   # the model the run builds (its bodies cached) for the post-processing
         figures.submit("layout.png", run_figures.layout, out_dir, model.layout)   # drawn during the co-simulation
-        compiled = _compiled_sensors(scenario, model)
-        columns = None if save_states else merge_columns(analysis_columns(model), sensor_columns(model, compiled))
-        res = _cosimulate(scenario, out_dir, progress, backend, columns)
-        t_post = time.perf_counter()
-        sig = run_figures.plotted_signals(res)   # drawn while the main process post-processes
-        figures.submit("contact_forces.png", run_figures.contact_forces, out_dir, scenario.name, sig)
-        figures.submit("displacements.png", run_figures.displacements, out_dir, scenario.name, sig)
-        summary, sensors, an, geometry = _post_process(scenario, backend, model, compiled, res)
-        states = _states_to_save(res.track_record) if save_states else None
-        res.track_record = None  # post-processed: what is not asked for is not kept
-        t_write = time.perf_counter()
-        _submit_analysis_figures(figures, out_dir, scenario.name, model.layout, sig, an, geometry)
-        # ---- signals first: nothing computed is lost if a later step fails
-        _write_signals(out_dir, res, sensors)
-        _write_h5(out_dir / "results.h5", res, sensors, an, states, geometry)
-        del states
-        failed = figures.close()
+        with threadpool_limits(limits=RUN_BLAS_THREADS):   # the other core is the figure process's
+            compiled = _compiled_sensors(scenario, model)
+            columns = None if save_states else merge_columns(analysis_columns(model), sensor_columns(model, compiled))
+            res = _cosimulate(scenario, out_dir, progress, backend, columns)
+            t_post = time.perf_counter()
+            sig = run_figures.plotted_signals(res)   # drawn while the main process post-processes
+            figures.submit("contact_forces.png", run_figures.contact_forces, out_dir, scenario.name, sig)
+            figures.submit("displacements.png", run_figures.displacements, out_dir, scenario.name, sig)
+            summary, sensors, an, geometry = _post_process(scenario, backend, model, compiled, res)
+            states = _states_to_save(res.track_record) if save_states else None
+            res.track_record = None  # post-processed: what is not asked for is not kept
+            t_write = time.perf_counter()
+            _submit_analysis_figures(figures, out_dir, scenario.name, model.layout, sig, an, geometry)
+            # ---- signals first: nothing computed is lost if a later step fails
+            _write_signals(out_dir, res, sensors)
+            _write_h5(out_dir / "results.h5", res, sensors, an, states, geometry)
+            del states
+            failed = figures.close()
     t_end = time.perf_counter()
     if failed:
         summary["figures_failed"] = failed
