@@ -53,14 +53,14 @@ def timed(sc, backend, fmu_dir=None):
 def solve_costs(sc, repeat=2000):
     """us per solve with SuperLU (numpy path) and LDL^T (compiled path), per product with K."""
     from track.dynamics import TrackIntegrator
-    from track.kernel import LDLFactor, _csr_matvec_sub, compressed_rows, ldl_solve, prune
+    from track.kernel import LDLFactor, _sym_matvec_sub, ldl_solve, lower_rows, prune
     from track.model import build_track
 
     model = build_track(sc.track)
     integ = TrackIntegrator(model, sc.simulation.step, np.zeros(model.n))
     f = LDLFactor(prune(integ.step_matrix))
     K = prune(integ._Kt)
-    Krows = compressed_rows(K)
+    Krows = lower_rows(K)
     b, x, w, y = np.random.default_rng(0).standard_normal(model.n), np.empty(model.n), np.empty(model.n), \
         np.zeros(model.n)
     ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, b, x, w)
@@ -68,7 +68,7 @@ def solve_costs(sc, repeat=2000):
     for name, fn in (("SuperLU solve", lambda: integ._lu.solve(b)),
                      ("LDL^T solve (compiled)", lambda: ldl_solve(f.perm, f.Lp, f.Li, f.Lx, f.d, b, x, w)),
                      ("K product, scipy (unpruned)", lambda: integ._Kt @ b),
-                     ("K product, compiled (pruned, by rows)", lambda: _csr_matvec_sub(*Krows, b, y))):
+                     ("K product, compiled (pruned, lower triangle)", lambda: _sym_matvec_sub(*Krows, b, y))):
         fn()
         t0 = time.perf_counter()
         for _ in range(repeat):

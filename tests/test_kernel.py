@@ -13,7 +13,8 @@ from orchestrator.cosim.master import run_cosim
 from orchestrator.inputs.scenario import load_scenario
 from track import dynamics
 from track.dynamics import TrackIntegrator
-from track.kernel import INFLUENCE_AHEAD, KERNEL_ENV, LDLFactor, _csr_matvec_sub, _indices, compressed_rows, prune
+from track.kernel import (INFLUENCE_AHEAD, KERNEL_ENV, LDLFactor, _coo_matvec_sub, _indices, _sym_matvec_sub,
+                          coordinate_entries, lower_rows, prune)
 from track.layout import build_layout
 from track.model import build_track
 from track.statics import static_equilibrium
@@ -103,9 +104,11 @@ def test_ldl_solve_is_exact_to_round_off():
     assert np.abs(A @ X - B).max() / (norm_A * np.abs(X).max()) < 1e-13
 
 
-def test_compressed_row_product_against_scipy():
-    """``_csr_matvec_sub`` (the step's K and C products) against scipy's own sparse product, on a
-    random matrix with empty rows and columns; and the uint32 index check.
+def test_the_step_products_against_scipy():
+    """``_sym_matvec_sub`` (the step's K product, by the lower triangle) and ``_coo_matvec_sub`` (the
+    C product, by entries) against scipy's own sparse product, on random matrices with an empty row
+    (the symmetric one: empty but for a zero diagonal); the symmetric form refuses a matrix that is not;
+    and the uint32 index check.
 
     Tolerance 1e-14 of the largest |out| entry: both sum at most a few terms per row in float64
     (a few ulp of round-off apart when their summation orders differ)."""
@@ -113,13 +116,20 @@ def test_compressed_row_product_against_scipy():
     X = sp.random(300, 300, density=0.02, random_state=4, format="lil")
     X[17, :] = 0.0                        # an empty row
     X = sp.csr_matrix(X)
+    S = sp.lil_matrix(X + X.T)
+    S[17, :] = 0.0
+    S[:, 17] = 0.0                        # and its column: row 17 of S empty, diagonal included
+    S = sp.csr_matrix(S)
     x = rng.standard_normal(300)
     out0 = rng.standard_normal(300)
-    out = out0.copy()
-    _csr_matvec_sub(*compressed_rows(X), x, out)
-    ref = out0 - X @ x
-    assert np.abs(out - ref).max() <= 1e-14 * np.abs(ref).max()
-    assert out[17] == out0[17]
+    for M, product, form in ((S, _sym_matvec_sub, lower_rows), (X, _coo_matvec_sub, coordinate_entries)):
+        out = out0.copy()
+        product(*form(M), x, out)
+        ref = out0 - M @ x
+        assert np.abs(out - ref).max() <= 1e-14 * np.abs(ref).max()
+        assert out[17] == out0[17]
+    with pytest.raises(ValueError, match="symmetric"):
+        lower_rows(X)
     with pytest.raises(ValueError, match="uint32"):
         _indices(np.array([0, -1]), "test indices")
 

