@@ -41,14 +41,17 @@ pivoting on the symmetric permutation ``P`` of a minimum-degree ordering of
 against 100k in the LU with the MMD(A^T A) ordering the numpy path uses
 (benchmarks/bench_step.py measures both).
 
-Sparse loops. Every sparse loop of the step runs over compressed rows or columns with
-``uint32`` indices: the products with K and C row by row (``out_i -= sum_k val_k x_{col_k}``,
-one accumulator per row, columns ascending), the forward sweep of ``L y = b`` column by column
+Sparse loops. Every sparse loop of the step runs with ``uint32`` indices: the product with the
+symmetric K over its lower triangle by rows, each entry below the diagonal serving its row and its
+column (:func:`_sym_matvec_sub`; K is read once: 12.3 -> 9.1 us on the 64-sleeper panel), the
+product with C_r (the damping beyond the stiffness-proportional part: 1101 entries in 2770 mostly
+empty rows) over its entries (:func:`_coo_matvec_sub`, 2.7 -> 1.5 us), the forward sweep of ``L y = b`` column by column
 (``y_j`` is final when column j comes: all its updates come from columns < j) and the backward
 sweep of ``L^T z = y`` column by column from the last, as a dot product of column j with the
-final ``z_i``, i > j (:func:`ldl_solve`). The products and the forward sweep do each output's
-operations in the order of the flat loops over entries (``w[dst[k]] -= val[k] * x[src[k]]``, by
-columns) that these replaced, so they give the same numbers to the last bit. The backward sweep
+final ``z_i``, i > j (:func:`ldl_solve`). The forward sweep does each output's operations in the
+order of the flat loop over entries (``w[dst[k]] -= val[k] * x[src[k]]``, by columns) it replaced;
+the two products sum in another order than the row-by-row loops before them (2026-11-27, session
+26): a different rounding, ~1e-12 of every result. The backward sweep
 sums each column's dot product in two accumulators (even and odd entries), which breaks the
 chain of dependent subtractions in two: a different rounding, up to 4e-13 of the peak contact
 force on the default, 64-sleeper and profile scenarios (measured against the single-accumulator
