@@ -262,6 +262,7 @@ def _add_figures_command(sub) -> None:
     _add_executor_options(figs)
     figs.set_defaults(handler=_cmd_figures)
 
+
 _ONE_COMMAND = False   # set by console(): this process runs one command, then ends (_jobs freezes its imports)
 
 
