@@ -429,7 +429,7 @@ def _fake_target(channels, sigma):
     from types import SimpleNamespace
 
     groups = {k: ("P" if i < 2 else "Q") for i, k in enumerate(channels)}
-    layout = SimpleNamespace(groups=groups, weights={"P": 1.0, "Q": 1.0})
+    layout = SimpleNamespace(groups=groups, weights={"P": 1.0, "Q": 1.0}, types={k: "pressure" for k in channels})
     measured = SimpleNamespace(channels=channels, t=np.arange(next(iter(channels.values())).size) * 2e-4, dt=2e-4)
     return SimpleNamespace(layout=layout, measured=measured, sigma=sigma,
                            scale={k: float(np.std(v)) for k, v in channels.items()})
@@ -500,6 +500,35 @@ def test_share_of_a_misfit_within_the_noise_margin_is_measured_against_the_margi
     ev = assess(cause, 1, ref, 0, target)
     assert ev.share == pytest.approx((ref.objective - cause.objective) / (0.5 * j_noise), rel=1e-9), ev
     assert ev.share < MIN_SHARE and not ev.passes and "share" in ev.failed, ev
+
+
+def test_share_below_the_noise_objective_with_a_loud_channel_is_measured_against_the_margin():
+    """J_noise read high by some channels puts J_ref below it while another channel holds a clear misfit (the
+    field matrix of 2026-11-27: off-sensor voids at their true sleeper refused, J_ref 0.6 J_noise, pressure
+    cell A6 23x its own noise level). Built by hand: group P's sigma is read at 20 % of each channel's
+    spread where its residual is 1 % white noise; group Q's is right (1 %) and its residual is a 20 ms bump
+    of 10 % of the spread on that noise, loud (RMS ~4.8x its first-difference level > LOUD_FACTOR 3).
+    J_noise = (0.20 + 0.01) / 2, J_ref ~ (0.01 + 0.048) / 2 < J_noise. The share is then measured against
+    0.5 J_noise, as within the noise margin: removing the bump removes ~0.019, a share ~0.36, named; a cause
+    that removes a tenth of it is not. Without the loud channel (Q's residual white too) the share stays
+    undefined (JSON null) and nothing passes."""
+    from orchestrator.inverse.significance import MIN_SHARE, NONE_MARGIN, assess, loud_channels
+
+    channels, sd, _, bump, noise = _bump_misfit(9)
+    target = _fake_target(channels, {k: (0.20 if k[0] == "P" else 0.01) * sd[k] for k in channels})
+    ref = _cmp_of(target, {k: (0.1 * sd[k] * bump if k[0] == "Q" else 0.0) + noise[k] for k in channels})
+    real = _cmp_of(target, noise)
+    tenth = _cmp_of(target, {k: (0.09 * sd[k] * bump if k[0] == "Q" else 0.0) + noise[k] for k in channels})
+    j_noise = (0.20 + 0.01) / 2
+    assert ref.objective < 0.5 * j_noise and set(loud_channels(ref, target)) == {"Q1", "Q2"}
+    good = assess(real, 1, ref, 0, target)
+    assert good.share == pytest.approx((ref.objective - real.objective) / (NONE_MARGIN * j_noise), rel=1e-9)
+    assert good.passes and good.share >= MIN_SHARE, good
+    small = assess(tenth, 1, ref, 0, target)
+    assert not small.passes and "share" in small.failed and small.share < MIN_SHARE, small
+    quiet_ref = _cmp_of(target, noise)
+    quiet = assess(real, 1, quiet_ref, 0, target)
+    assert not quiet.passes and quiet.to_json()["share_of_explainable_misfit"] is None
 
 
 def test_interval_of_a_linear_fit_is_the_textbook_one():

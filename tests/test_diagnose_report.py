@@ -65,3 +65,15 @@ def test_plots_drawn_by_workers_are_the_plots_drawn_here(tmp_path):
     t_a, b_a, _, lay_a, g = figures[0][2]
     assert g == "A" and sorted(t_a.measured.channels) == ["A1", "A2"] and lay_a.ids == ["A1", "A2"]
     assert sorted(b_a.simulated) == ["A1", "A2"]
+
+
+def test_the_verdict_names_what_a_share_was_measured_against():
+    """A named cause's share (significance.assess) is of the misfit above the noise, or — with J_ref within
+    the noise margin or below the noise objective — of that margin, 0.5 J_noise; the verdict says which, so a
+    report whose J_ref (0.038) is below J_noise (0.057) does not speak of "the misfit above the noise"."""
+    above = report._share({"share_of_explainable_misfit": 0.9, "objective_reference": 0.38, "objective_noise": 0.057})
+    below = report._share({"share_of_explainable_misfit": 0.64, "objective_reference": 0.038,
+                           "objective_noise": 0.057})
+    assert above == "90 % of the misfit above the noise"
+    assert below.startswith("64 % of the noise objective's margin") and "0.057" in below
+    assert "undefined" in report._share({"share_of_explainable_misfit": None})

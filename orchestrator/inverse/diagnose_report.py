@@ -145,8 +145,18 @@ def _label(c) -> str:
     return c.cause + ("" if c.sleeper is None else f" at sleeper {c.sleeper}")
 
 
-def _share(x) -> str:
-    return "an undefined share" if x is None else f"{100 * x:.0f} %"
+def _share(s: dict) -> str:
+    """The share of the explainable misfit a cause removed, and what it was measured against
+    (:func:`orchestrator.inverse.significance.assess`: the misfit above the noise, or the noise margin when
+    J_ref is within it or below the noise objective)."""
+    from orchestrator.inverse.significance import NONE_MARGIN
+
+    x, j, jn = s.get("share_of_explainable_misfit"), s.get("objective_reference"), s.get("objective_noise")
+    if x is None:
+        return "an undefined share of the misfit above the noise"
+    if j is not None and jn is not None and j - jn < NONE_MARGIN * jn:
+        return f"{100 * x:.0f} % of the noise objective's margin, {NONE_MARGIN:g} x {jn:.4g}"
+    return f"{100 * x:.0f} % of the misfit above the noise"
 
 
 def _refit_words(c) -> str:
@@ -170,7 +180,7 @@ def _verdict_lines(result: Diagnosis) -> list[str]:
             amb = (c.ambiguity or {}).get("candidates", [])
             lines += ["", f"- {_label(c)}: {_fmt(c.parameters)}; J {s.get('objective_reference', float('nan')):.4g}"
                           f" → {c.objective:.4g} (gain {100 * c.gain:.1f} %, "
-                          f"{_share(s.get('share_of_explainable_misfit'))} of the misfit above the noise); "
+                          f"{_share(s)}); "
                           f"ΔBIC on {s.get('n_eff', 0):.0f} effective samples {s.get('delta_bic_eff', 0):.3g}"
                           + (f"; cannot be told apart from {', '.join(amb[1:])}" if len(amb) > 1 else "")
                           + (f"; {c.ambiguity['open_beyond']}" if (c.ambiguity or {}).get("open_beyond") else "")

@@ -39,6 +39,16 @@ here has four parts, all of which a cause must pass (:func:`assess`):
    from 6.00 to 6.19 mrad, its 90 % interval holding the nominal, removed 2.9 % of J and
    83 % of ``J_ref - J_noise``, and was named; against the margin it removes 6 %.
    (2026-11-27, found on two seeds per family drawn after the rule was last changed.)
+   At or below ``J_noise`` the share is undefined and no cause passes — unless a channel
+   is loud (:func:`loud_channels`): then the residual is *not* at the noise level (the
+   loud channel vetoes ``none``, below), ``J_noise`` has been read high by the other
+   channels, and the misfit is measured against the same margin, ``NONE_MARGIN J_noise``.
+   Before 2026-11-28 it stayed undefined there, so the rule contradicted itself: the answer
+   was ``unexplained`` ("a residual above the noise") while no cause could ever pass. On the
+   field matrix of 2026-11-27 22:12 this refused, on three off-sensor voids, a void fitted
+   at the true sleeper (24, 26 and 16: gains 48, 36 and 17 % of J, delta BIC 150-360)
+   because ``J_ref`` (0.025-0.038) was below ``J_noise`` (0.056-0.057) while pressure cell A6
+   stood 23 times above its own noise level.
    Why a quarter: the compensations of model-form error by a wrong catalogue cause seen
    in issue 14 removed 1.8 % and 4.3 % of J (well below a tenth of the explainable
    misfit); a true single effect at 1 % noise removes more than 80 % (the hidden-effect
@@ -284,8 +294,9 @@ class Evidence:
     gain : float
         1 - J_cause / J_ref.
     share : float
-        (J_ref - J_cause) / (J_ref - J_noise): share of the explainable misfit removed
-        (NaN when the reference is at or below the noise objective; ``null`` in JSON).
+        (J_ref - J_cause) / (J_ref - J_noise): share of the explainable misfit removed; against
+        ``NONE_MARGIN J_noise`` within the noise margin, or at or below the noise objective with a
+        loud channel; NaN at or below it without one (``null`` in JSON).
     objective_ref, objective_noise : float
         J_ref and J_noise.
     delta_bic : float
@@ -344,8 +355,8 @@ def assess(cand: Comparison, k: int, ref: Comparison, k_ref: int, target) -> Evi
     j_noise = noise_objective(target, ref)
     gain = 1.0 - cand.objective / ref.objective if ref.objective > 0 else 0.0
     room = ref.objective - j_noise
-    if room > 0:   # within the noise margin the misfit is measured against the margin (module doc, 2.)
-        room = max(room, NONE_MARGIN * j_noise)
+    if room > 0 or loud_channels(ref, target):   # within the noise margin, or at/below J_noise with a loud
+        room = max(room, NONE_MARGIN * j_noise)  # channel: the misfit is measured against the margin (module doc, 2.)
     share = (ref.objective - cand.objective) / room if room > 0 else float("nan")
     d_bic = bic_eff(ref, target.sigma, neff, k_ref) - bic_eff(cand, target.sigma, neff, k_ref + k)
     held = held_out_groups(cand, ref, target)
