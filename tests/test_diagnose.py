@@ -475,6 +475,7 @@ def test_rule_rejects_a_small_systematic_improvement_and_accepts_a_real_one():
     assert not small.passes and small.share < MIN_SHARE and small.gain > 0, small
     good = assess(real, 1, ref, 0, target)
     assert good.passes and good.share == pytest.approx(1.0, abs=0.05), good
+    assert good.share_of == "misfit_above_noise"
     bad = assess(trade, 1, ref, 0, target)
     assert not bad.passes and any("held out" in r for r in bad.reasons), bad
     quiet = assess(real, 1, real, 0, _fake_target(channels, {k: 0.05 * sd[k] for k in channels}))   # below noise
@@ -524,11 +525,13 @@ def test_share_below_the_noise_objective_with_a_loud_channel_is_measured_against
     good = assess(real, 1, ref, 0, target)
     assert good.share == pytest.approx((ref.objective - real.objective) / (NONE_MARGIN * j_noise), rel=1e-9)
     assert good.passes and good.share >= MIN_SHARE, good
+    assert good.share_of == "noise_margin" and good.to_json()["share_of"] == "noise_margin"
     small = assess(tenth, 1, ref, 0, target)
     assert not small.passes and "share" in small.failed and small.share < MIN_SHARE, small
     quiet_ref = _cmp_of(target, noise)
     quiet = assess(real, 1, quiet_ref, 0, target)
     assert not quiet.passes and quiet.to_json()["share_of_explainable_misfit"] is None
+    assert quiet.to_json()["share_of"] is None
 
 
 def test_interval_of_a_linear_fit_is_the_textbook_one():

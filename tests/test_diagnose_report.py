@@ -70,10 +70,13 @@ def test_plots_drawn_by_workers_are_the_plots_drawn_here(tmp_path):
 def test_the_verdict_names_what_a_share_was_measured_against():
     """A named cause's share (significance.assess) is of the misfit above the noise, or — with J_ref within
     the noise margin or below the noise objective — of that margin, 0.5 J_noise; the verdict says which, so a
-    report whose J_ref (0.038) is below J_noise (0.057) does not speak of "the misfit above the noise"."""
-    above = report._share({"share_of_explainable_misfit": 0.9, "objective_reference": 0.38, "objective_noise": 0.057})
-    below = report._share({"share_of_explainable_misfit": 0.64, "objective_reference": 0.038,
-                           "objective_noise": 0.057})
+    report whose J_ref (0.038) is below J_noise (0.057) does not speak of "the misfit above the noise". The
+    verdict reads which from the evidence (``share_of``), not by deciding the rule again."""
+    limits = {"none_margin": 0.5}
+    above = report._share({"share_of_explainable_misfit": 0.9, "share_of": "misfit_above_noise",
+                           "objective_reference": 0.38, "objective_noise": 0.057, "thresholds": limits})
+    below = report._share({"share_of_explainable_misfit": 0.64, "share_of": "noise_margin",
+                           "objective_reference": 0.038, "objective_noise": 0.057, "thresholds": limits})
     assert above == "90 % of the misfit above the noise"
     assert below.startswith("64 % of the noise objective's margin") and "0.057" in below
     assert "undefined" in report._share({"share_of_explainable_misfit": None})

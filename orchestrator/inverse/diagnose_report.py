@@ -147,15 +147,12 @@ def _label(c) -> str:
 
 def _share(s: dict) -> str:
     """The share of the explainable misfit a cause removed, and what it was measured against
-    (:func:`orchestrator.inverse.significance.assess`: the misfit above the noise, or the noise margin when
-    J_ref is within it or below the noise objective)."""
-    from orchestrator.inverse.significance import NONE_MARGIN
-
-    x, j, jn = s.get("share_of_explainable_misfit"), s.get("objective_reference"), s.get("objective_noise")
+    (``significance.share_of``, :func:`orchestrator.inverse.significance.assess`)."""
+    x = s.get("share_of_explainable_misfit")
     if x is None:
         return "an undefined share of the misfit above the noise"
-    if j is not None and jn is not None and j - jn < NONE_MARGIN * jn:
-        return f"{100 * x:.0f} % of the noise objective's margin, {NONE_MARGIN:g} x {jn:.4g}"
+    if s.get("share_of") == "noise_margin":
+        return f"{100 * x:.0f} % of the noise objective's margin, {s['thresholds']['none_margin']:g} x {s['objective_noise']:.4g}"
     return f"{100 * x:.0f} % of the misfit above the noise"
 
 

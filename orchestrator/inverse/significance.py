@@ -312,6 +312,9 @@ class Evidence:
     failed : list of str
         Which parts of the rule it fails, one code per reason: ``significance``, ``share``,
         ``worse``, ``held_out`` (empty: it passes).
+    share_of : str or None
+        What ``share`` divides by: ``"misfit_above_noise"`` (J_ref - J_noise), ``"noise_margin"``
+        (``NONE_MARGIN J_noise``) or ``None`` (undefined).
     """
 
     gain: float
@@ -325,6 +328,7 @@ class Evidence:
     held_out: dict = field(default_factory=dict)
     reasons: list = field(default_factory=list)
     failed: list = field(default_factory=list)
+    share_of: str | None = None
 
     @property
     def passes(self) -> bool:
@@ -339,11 +343,13 @@ class Evidence:
     def to_json(self) -> dict:
         """JSON-able dict (keys as the attributes, plus ``passes`` and the thresholds)."""
         share = self.share if np.isfinite(self.share) else None   # undefined at or below the noise: null, not NaN
-        return {"gain": self.gain, "share_of_explainable_misfit": share, "objective_reference": self.objective_ref,
+        return {"gain": self.gain, "share_of_explainable_misfit": share, "share_of": self.share_of,
+                "objective_reference": self.objective_ref,
                 "objective_noise": self.objective_noise, "delta_bic_eff": self.delta_bic, "chi2_eff": self.chi2_eff,
                 "n_samples": self.n, "n_eff": self.n_eff, "held_out_groups": self.held_out, "passes": self.passes,
                 "reasons": list(self.reasons), "failed": list(self.failed),
-                "thresholds": {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL}}
+                "thresholds": {"delta_bic": DELTA_BIC, "min_share": MIN_SHARE, "cv_tol": CV_TOL,
+                               "none_margin": NONE_MARGIN}}
 
 
 def assess(cand: Comparison, k: int, ref: Comparison, k_ref: int, target) -> Evidence:
@@ -354,10 +360,12 @@ def assess(cand: Comparison, k: int, ref: Comparison, k_ref: int, target) -> Evi
     neff = channel_neff(cand)
     j_noise = noise_objective(target, ref)
     gain = 1.0 - cand.objective / ref.objective if ref.objective > 0 else 0.0
-    room = ref.objective - j_noise
+    room, share_of = ref.objective - j_noise, "misfit_above_noise"
     if room > 0 or loud_channels(ref, target):   # within the noise margin, or at/below J_noise with a loud
-        room = max(room, NONE_MARGIN * j_noise)  # channel: the misfit is measured against the margin (module doc, 2.)
+        if room < NONE_MARGIN * j_noise:         # channel: the misfit is measured against the margin (module doc, 2.)
+            room, share_of = NONE_MARGIN * j_noise, "noise_margin"
     share = (ref.objective - cand.objective) / room if room > 0 else float("nan")
+    share_of = share_of if np.isfinite(share) else None
     d_bic = bic_eff(ref, target.sigma, neff, k_ref) - bic_eff(cand, target.sigma, neff, k_ref + k)
     held = held_out_groups(cand, ref, target)
     reasons, failed = [], []
@@ -375,7 +383,7 @@ def assess(cand: Comparison, k: int, ref: Comparison, k_ref: int, target) -> Evi
         failed.append("held_out")
         reasons.append(f"with group(s) {', '.join(worse_groups)} held out the other groups fit worse")
     return Evidence(gain, share, ref.objective, j_noise, d_bic, chi2_eff(cand, target.sigma, neff), cand.n,
-                    float(sum(neff.values())), held, reasons, failed)
+                    float(sum(neff.values())), held, reasons, failed, share_of)
 
 
 def _pct(x: float) -> str:
