@@ -83,7 +83,7 @@ NEAR = 1                # sleepers between an `unexplained` location and an off-
 GAIN_MIN, GAIN_MIN_MISMATCH = 0.80, 0.50   # the acceptance's gains without / with model-form mismatch
 SEED0 = 7000            # seed of the k-th case of a family: SEED0 + 101 k (draw_case mixes in the family)
 DETECT_VERSION = 2      # of detect.json's content: a cached file of another version is computed anew
-TRUTH_GAIN_VERSION = 3  # of truth_gain.json's content (the same rule); 2: with the nuisance refit (step 5c); 3: and the speed again
+TRUTH_GAIN_VERSION = 4  # of truth_gain.json's content (the same rule); 2: with the nuisance refit (step 5c); 3: and the speed again; 4: step 5c keeps the best point of both paths
 DETECT_BANDS = (0.25, 1.0)   # edges of the bands of the best channel's rho: fixed in the task (issue 14's
 #                              detectability brief) before any case's ratio was computed, not fitted to the cases
 

@@ -534,6 +534,82 @@ def test_share_below_the_noise_objective_with_a_loud_channel_is_measured_against
     assert quiet.to_json()["share_of"] is None
 
 
+def test_step_5c_keeps_the_best_point_of_both_paths(monkeypatch):
+    """Step 5c (diagnose._nuisance_again) tries the nuisance refit, the speed found again on the refit's model,
+    and the speed found again on the model given, and keeps the point of least J among those that fit better
+    (diagnose._lower: J falls, and the chi-square or the deviance on the effective sample size falls with it).
+    A logic check on hand-built residuals (the two nuisance steps replaced by fakes that return them). Group
+    Q's sigma is read 5x low, as the reconstructed displacements' is (significance, "Known limits"). The model
+    given: a bump of 10 % of P's spread, Q at its noise. Its points:
+
+    - the refit: P's bump down to 4 %, a 2 % bump on Q. J falls, the chi-square rises (Q's low sigma),
+      and the deviance falls: it fits better. The old rule (both chi-square and J) refused it.
+    - the refit, then the speed: P's bump 2 %, a 1 kHz ringing of 2 % on Q. Its J is the least of all, but
+      the chi-square and the deviance both rise (the ringing is nearly white: Q counts ~560 effective
+      samples against P's ~12): not better.
+    - the speed on the model given: P's bump 7 %. J and the chi-square fall: the old rule's answer.
+
+    Kept: the refit. When the refit's point is the ringing one too, the speed on the model given is kept;
+    when no point is better, the values given stand. The runs of all paths are counted either way."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from orchestrator.inverse import nuisance
+    from orchestrator.inverse.diagnose import _lower, _nuisance_again
+    from orchestrator.inverse.nuisance import NuisanceFit
+    from orchestrator.inverse.significance import channel_neff, deviance
+
+    channels, sd, _, bump, noise = _bump_misfit(21)
+    target = _fake_target(channels, {k: (0.01 if k[0] == "P" else 0.002) * sd[k] for k in channels})
+    ring = np.sin(2 * np.pi * 1000.0 * target.measured.t)
+
+    def point(p, q, a=0.0):
+        return _cmp_of(target, {k: (p * bump if k[0] == "P" else q * bump + a * ring) * sd[k] + noise[k]
+                                for k in channels})
+
+    given, refit, both, speed = point(0.10, 0.0), point(0.04, 0.02), point(0.02, 0.0, 0.02), point(0.07, 0.0)
+
+    def dev_change(c):
+        neff = channel_neff(c)
+        return deviance(c, target.sigma, neff) - deviance(given, target.sigma, neff)
+
+    # the points are what the docstring says they are
+    assert both.objective < refit.objective < speed.objective < given.objective
+    assert refit.chi2 > given.chi2 and dev_change(refit) < 0 and _lower(refit, given, target.sigma)
+    assert both.chi2 > given.chi2 and dev_change(both) > 0 and not _lower(both, given, target.sigma)
+    assert speed.chi2 < given.chi2 and _lower(speed, given, target.sigma)
+
+    def run(refit_point, speed_point):
+        def fake_refit(pool, tg, nz, raw, cmp, judge=True):
+            assert not judge and raw == {"model": "given"} and cmp is given
+            nz.runs += 9
+            return replace(nz, raw={"model": "refit"}, refit={"reason": "test"}), refit_point
+
+        def fake_speed(pool, tg, nz, raw, cmp, judge=True):
+            assert not judge
+            nz.runs += 2
+            after = {"given": ({"model": "speed"}, speed_point), "refit": ({"model": "refit, speed"}, both)}
+            new_raw, new_cmp = after[raw["model"]]
+            nz.speed_again, nz.raw = {"runs": 2}, new_raw
+            return nz, new_raw, new_cmp
+
+        monkeypatch.setattr(nuisance, "refit_with_causes", fake_refit)
+        monkeypatch.setattr(nuisance, "speed_again", fake_speed)
+        nz = NuisanceFit({"model": "given"}, {"speed": 30.0}, {"speed": 30.0}, {}, {}, {}, 0.0, given, 40)
+        return _nuisance_again(SimpleNamespace(spare=0), SimpleNamespace(target=target), nz, {"model": "given"},
+                               given)
+
+    fit, raw, cmp = run(refit, speed)
+    assert raw == {"model": "refit"} and cmp is refit and fit.refit == {"reason": "test"}
+    assert fit.speed_again is None and fit.runs == 40 + 9 + 2 + 2
+    assert fit.notes[-1].endswith("kept the refit"), fit.notes
+    fit, raw, cmp = run(both, speed)
+    assert raw == {"model": "speed"} and cmp is speed and fit.refit is None and fit.runs == 53
+    fit, raw, cmp = run(both, point(0.11, 0.0))
+    assert raw == {"model": "given"} and cmp is given and fit.runs == 53
+    assert "none fits better" in fit.notes[-1], fit.notes
+
+
 def test_interval_of_a_linear_fit_is_the_textbook_one():
     """:func:`unit_covariance` of a straight-line least-squares problem with white errors (N_eff = N) equals
     the textbook covariance s^2 (X^T X)^-1 (numpy lstsq residuals; independent formula); with the residual

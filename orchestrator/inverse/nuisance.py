@@ -797,7 +797,7 @@ def _jacobian_at(rn: _Runs, u: np.ndarray, r: np.ndarray, free: np.ndarray) -> n
 
 
 def refit_with_causes(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
-                      start: Comparison) -> tuple[NuisanceFit, Comparison] | None:
+                      start: Comparison, judge: bool = True) -> tuple[NuisanceFit, Comparison] | None:
     """Stage 4, after the causes: the vehicle and damping values fitted again on the extended model.
 
     Stage 3 runs before any cause, so a track effect's signature that a vehicle or damping value
@@ -821,12 +821,14 @@ def refit_with_causes(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
       21 diagnoses against 40 and left two of the gains that the full fit raised past their target;
     - the acceptance rule and the intervals of stage 3, on that Jacobian and the last residual;
       the values not accepted at nominal (one more run when that changes the point);
-    - kept only when both chi-square and J fall below ``start``'s.
+    - kept only when both chi-square and J fall below ``start``'s; with ``judge=False`` returned
+      whatever it gives, for the caller to judge (the diagnosis's step 5c weighs it against the
+      speed found again on either model: :func:`orchestrator.inverse.diagnose._nuisance_again`).
 
     Input: the pool, the target (its shift and gains: stage 3's), stage 2-3's result, the
     extended raw scenario (stage 3's nuisance values and the named causes applied) and its
     comparison ``start``. Output: ``None`` when not kept (stage 3's values stand; a note says
-    why), else the updated :class:`NuisanceFit` (``values``, ``intervals``, ``identifiable``,
+    why) or when there is nothing to refit, else the updated :class:`NuisanceFit` (``values``, ``intervals``, ``identifiable``,
     ``shift`` and ``raw`` — the extended scenario with the refit's values — are the refit's;
     ``refit`` says what changed; ``cmp`` stays the reference's) and the extended model's new
     comparison. The refit moves the time shift on a copy of ``target``: ``target`` itself is not
@@ -853,7 +855,7 @@ def refit_with_causes(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     if not np.array_equal(u_final, u):
         cmp = rn.comparisons([u_final])[0]
     nz.runs += rn.runs
-    if not (cmp.chi2 < start.chi2 and cmp.objective < start.objective):
+    if judge and not (cmp.chi2 < start.chi2 and cmp.objective < start.objective):
         nz.notes.append(f"refit with the named causes: J {start.objective:.4g} -> {cmp.objective:.4g}, chi-square "
                         f"{start.chi2:.4g} -> {cmp.chi2:.4g}; not both lower: stage 3's values stand")
         return None
@@ -890,7 +892,7 @@ def _refitted(nz: NuisanceFit, rn: _Runs, keep: np.ndarray, free: np.ndarray, u_
 
 
 def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
-                start: Comparison) -> tuple[NuisanceFit, dict, Comparison] | None:
+                start: Comparison, judge: bool = True) -> tuple[NuisanceFit, dict, Comparison] | None:
     """Stage 5, after the causes: stage 1's speed from the data again, on the extended model.
 
     Stage 1 warps the *nominal* run, and a track effect that changes the shape of the signals
@@ -904,8 +906,9 @@ def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     runs, the time shift aligned again), from the second run on at the secant's speed: here the
     warp asked for only about half the change each time (measured in
     tests/test_nuisance.py: 33.33 -> 33.88 m/s in three plain steps towards 34.57, the last still
-    asking +0.5 %). Kept when both chi-square and J fall below ``start``'s.
-    The causes' parameters and the vehicle's values are not fitted again (one pass).
+    asking +0.5 %). Kept when both chi-square and J fall below ``start``'s (with ``judge=False``:
+    returned whenever runs were made, for the caller to judge, as :func:`refit_with_causes`).
+    The causes' parameters and the vehicle's values are not fitted again here.
 
     Input: the pool, the target (not changed: a copy takes the new shift), the nuisance fit so
     far, the extended raw scenario and its comparison ``start``. Output: ``None`` (the speed
@@ -923,7 +926,7 @@ def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     raw_v, v, cmp, interval = speed_corrected(counted, own, raw_ext, start, notes, secant=True)
     nz.runs += counted.runs
     v0 = float(raw_ext["vehicle"]["speed"])
-    if not (cmp.chi2 < start.chi2 and cmp.objective < start.objective):
+    if judge and not (cmp.chi2 < start.chi2 and cmp.objective < start.objective):
         nz.notes.append(f"speed again with the named causes: {v0:.3f} -> {v:.3f} m/s does not lower both chi-square "
                         f"({start.chi2:.4g} -> {cmp.chi2:.4g}) and J ({start.objective:.4g} -> {cmp.objective:.4g}): "
                         "the speed stands")
