@@ -97,7 +97,9 @@ catalogue's causes are screened:
    (a Jacobian there, three Broyden-updated Gauss-Newton steps), kept when both chi-square and J
    fall; its values, intervals and acceptance are then reported.
 5. **The speed again, with the named causes** (:func:`speed_again`): stage 1 on the extended
-   model, kept when both chi-square and J fall. Stage 1's claim above that a track effect moves
+   model, kept when both chi-square and J fall. The diagnosis runs stages 4 and 5 unjudged
+   (``judge=False``) on two paths and keeps the best point by its own rule
+   (:func:`orchestrator.inverse.diagnose._nuisance_again`, step 5c). Stage 1's claim above that a track effect moves
    its estimate by at most 0.15 % held for the four truths it was measured on, not for all:
    on issue 14's field-like matrix a global pad change and a worn nose, each beside a vehicle
    mismatch, left it 1.5 % and 3.9 % off.
