@@ -759,3 +759,18 @@ def test_a_site_the_ranking_prefers_but_the_share_rejects_joins_the_named_causes
         assert (19 in entry.ambiguity["sleepers"]) is joins, entry.ambiguity
         assert 20 not in entry.ambiguity["sleepers"], entry.ambiguity
         assert ("ranked_above" in entry.ambiguity) is joins
+
+
+def test_the_verdict_says_a_cause_was_fitted_again_after_the_nuisance_refit():
+    """A named cause whose value step 5d changed (evidence.refit_nuisance) is reported with the value it was
+    named at and the extended model's J before and after, so the verdict's J (the naming round's) is not read
+    as that of the value shown."""
+    from orchestrator.inverse.diagnose_report import _refit_words
+    from orchestrator.inverse.diagnosis import CauseFit
+
+    c = CauseFit("rail_pad_stiffness", {"stiffness_scale": 4.0}, 0.0778, 0.7,
+                 {"refit_nuisance": {"parameters_before": {"stiffness_scale": 3.83}, "objective_before": 0.05054,
+                                     "objective_after": 0.04655}})
+    words = _refit_words(c)
+    assert "3.83" in words and "0.05054 → 0.04655" in words, words
+    assert _refit_words(CauseFit("rail_pad_stiffness", {"stiffness_scale": 4.0}, 0.0778, 0.7, {})) == ""

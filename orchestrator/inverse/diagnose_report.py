@@ -157,12 +157,18 @@ def _share(s: dict) -> str:
 
 
 def _refit_words(c) -> str:
-    """A named cause refitted with the other one (diagnose step 5b): from which values, and J before -> after."""
+    """A named cause refitted with the other one (diagnose step 5b) or after the nuisance values' refit (step 5d):
+    from which values, and J before -> after."""
+    out = ""
     r = c.evidence.get("refit")
-    if not r:
-        return ""
-    return (f"; refitted on the model with the other cause (named at {_fmt(r['parameters_round'])}): the extended "
-            f"model's J {r['objective_before']:.4g} → {r['objective_after']:.4g}")
+    if r:
+        out += (f"; refitted on the model with the other cause (named at {_fmt(r['parameters_round'])}): the extended "
+                f"model's J {r['objective_before']:.4g} → {r['objective_after']:.4g}")
+    r = c.evidence.get("refit_nuisance")
+    if r:
+        out += (f"; fitted again with the nuisance values refitted (from {_fmt(r['parameters_before'])}): the extended "
+                f"model's J {r['objective_before']:.4g} → {r['objective_after']:.4g}")
+    return out
 
 
 def _verdict_lines(result: Diagnosis) -> list[str]:
