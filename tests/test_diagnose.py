@@ -580,13 +580,12 @@ def test_step_5c_keeps_the_best_point_of_both_paths(monkeypatch):
     assert speed.chi2 < given.chi2 and _lower(speed, given, target.sigma)
 
     def run(refit_point, speed_point):
-        def fake_refit(pool, tg, nz, raw, cmp, judge=True):
-            assert not judge and raw == {"model": "given"} and cmp is given
+        def fake_refit(pool, tg, nz, raw, cmp):
+            assert raw == {"model": "given"} and cmp is given
             nz.runs += 9
             return replace(nz, raw={"model": "refit"}, refit={"reason": "test"}), refit_point
 
-        def fake_speed(pool, tg, nz, raw, cmp, judge=True):
-            assert not judge
+        def fake_speed(pool, tg, nz, raw, cmp):
             nz.runs += 2
             after = {"given": ({"model": "speed"}, speed_point), "refit": ({"model": "refit, speed"}, both)}
             new_raw, new_cmp = after[raw["model"]]

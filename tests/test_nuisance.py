@@ -282,7 +282,8 @@ def test_refit_with_the_named_cause_gives_back_what_stage_3_took_from_it(sc, poo
     here, the soft bed presses them against their box); the bed's stiffness, as a diagnosis would name
     it, is then put in at its true value, and stage 4 fits the nuisance values again on that.
 
-    Asserted: the refit is kept (both chi-square and J fall, its own rule) and accepts all five vehicle and
+    Asserted: the refit lowers both chi-square and J (the function returns it unjudged; the diagnosis's
+    step 5c judges) and accepts all five vehicle and
     damping values, each within the stage-3 test's tolerance of its truth (module doc: mass 1 %, k1 8 %,
     the dampings 5 %; measured 0.1 %, 1.7 %, 0.5 %, 0.4 %, 0.1 %) and with its 90 % interval holding it."""
     from orchestrator.inverse.nuisance import fit_nuisance, refit_with_causes
@@ -364,7 +365,7 @@ def test_speed_found_again_with_the_named_cause(sc, pool, tmp_path):
     the wheelset 16 % heavier and k1 18 % softer. Stages 1-3 run on the nominal scenario; the worn nose,
     as a diagnosis would name it, is then put in at its true value, and the speed is found again.
 
-    Asserted: stage 5 is kept (both chi-square and J fall, its own rule) and its speed is at least twice as
+    Asserted: stage 5 lowers both chi-square and J (returned unjudged, as stage 4) and its speed is at least twice as
     close to the truth as stages 1-3 left it. Measured: stage 1 found "the data agree with the scenario"
     (33.333 m/s, warp 0.9991) for a true 34.566; stage 5, 34.052 m/s in three runs (J 0.260 -> 0.133), the
     error 1.233 -> 0.514 m/s against the 0.617 asserted; with plain steps (no secant) 33.883, which fails.

@@ -68,8 +68,10 @@ module that applies it):
    parameters are fitted again (all of them, from their current values) on the model with
    the other at its latest values, first cause first — one pass of backfitting, so the
    extended model does not keep what the first cause took up of the second effect when it
-   was fitted alone, nor the second's fit to that. A refit is kept only when it lowers
-   both chi-square and J; the named entry then carries the refitted parameters, its intervals at them
+   was fitted alone, nor the second's fit to that. A refit is kept when it fits better
+   by step 5c's rule (:func:`_lower`; until 2026-11-28 both chi-square and J had to fall: on the
+   14 two-effect field-like cases one more refit is kept, its gain 0.005 points lower, the rest
+   unchanged); the named entry then carries the refitted parameters, its intervals at them
    (given the other cause as it was then) and the values it was named with under
    ``evidence.refit``. Its naming evidence and per-cause gain stay those of its round.
 5c. **Nuisance again** (:func:`_nuisance_again`,
@@ -94,8 +96,8 @@ module that applies it):
    J by up to 37 % were refused (the deviance, floored at each channel's noise level and counted on
    N_eff, is scale-free per channel and fell); keeping them under a looser rule but on one path moved
    the gains either way (-7.5 to +4.1 points), because a refit kept set another start for the speed.
-   Here the old rule's point is always among those tried and better, so a diagnosis's J can only
-   come out lower. These runs go beside those of step 6's intervals
+   Here the old rule's point is always among those tried and better, so from a given model J can
+   only come out lower. These runs go beside those of step 6's intervals
    (:func:`_named_and_nuisance_again`).
 5d. **Causes again** (:func:`_causes_again`): when step 5c moved the nuisance values, each named
    one-parameter cause (a global or local pad, the bed, the impact angle) is fitted again on its
@@ -345,19 +347,19 @@ def _nuisance_again(pool: Pool, inp: _Inputs, nz: NuisanceFit, ext_raw: dict,
 
     def refit_path() -> tuple[list, int]:
         mine = copy.deepcopy(nz)
-        got = refit_with_causes(pool, inp.target, mine, ext_raw, final, judge=False)
+        got = refit_with_causes(pool, inp.target, mine, ext_raw, final)
         if got is None:
             return [], mine.runs - nz.runs
         fit, cmp = got
         points = [("the refit", fit, fit.raw, cmp)]
-        sp = speed_again(pool, inp.target, copy.deepcopy(fit), fit.raw, cmp, judge=False)
+        sp = speed_again(pool, inp.target, copy.deepcopy(fit), fit.raw, cmp)
         if sp is not None:
             points.append(("the refit, then the speed", *sp))
         return points, points[-1][1].runs - nz.runs
 
     def speed_path() -> tuple[list, int]:
         mine = copy.deepcopy(nz)
-        sp = speed_again(pool, inp.target, mine, ext_raw, final, judge=False)
+        sp = speed_again(pool, inp.target, mine, ext_raw, final)
         return ([("the speed", *sp)] if sp is not None else []), mine.runs - nz.runs
 
     got = side_by_side(pool, {"refit": refit_path, "speed": speed_path})
@@ -401,7 +403,7 @@ def _causes_again(pool: Pool, inp: _Inputs, named: list[_Named], entries: list[C
         values = n.refit.values if n.refit is not None else n.e.values
         start = Evaluated(c, values, final, n.e.k, "fitted")
         fitter = CauseFitter(pool, own, ext_raw, start, final)
-        fitter.cache[np.clip(kind.to_unit(values), 0.0, 1.0).tobytes()] = final   # the start: the model itself
+        fitter.known(values, final)
         pool.expect(2 * FINE_MAX_NFEV)
         got = fitter.fit(start, slice(0, None), FINE_MAX_NFEV)
         if not _lower(got.cmp, final, inp.target.sigma):
@@ -564,7 +566,7 @@ def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: l
     One pass, in the order named: all of a cause's parameters (the finest stage of
     :func:`orchestrator.inverse.selection.cause_stages`) from its current values; each
     start is the current extended model itself (no run needed to know its comparison).
-    A refit that lowers both chi-square and J is kept: the cause's ``refit`` (and its fitter, for the
+    A refit that fits better by step 5c's rule (:func:`_lower`) is kept: the cause's ``refit`` (and its fitter, for the
     intervals), and the last cause's ``raw``, the extended model, takes the new values.
     """
     values = [n.e.values for n in named]
@@ -578,10 +580,11 @@ def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: l
                 raw = kind_of(m.e.candidate).apply(raw, m.e.candidate.sleeper, values[j])
         start = Evaluated(c, values[i], current, n.e.k, "fitted")
         fitter = CauseFitter(pool, target, raw, start, ref.cmp)
+        fitter.known(values[i], current)
         stages = cause_stages(kind)
         pool.expect(FINE_MAX_NFEV * (stages[-1][0] + 1))
         got = fitter.fit(start, slice(len(stages) - 1, None), FINE_MAX_NFEV)
-        if got.cmp.chi2 < current.chi2 and got.cmp.objective < current.objective:   # never a worse fit
+        if _lower(got.cmp, current, target.sigma):   # never a worse fit (step 5c's rule)
             n.refit, n.refit_fitter, n.refit_from = got, fitter, current.objective
             values[i], current = got.values, got.cmp
             named[-1].raw = kind.apply(raw, c.sleeper, got.values)

@@ -130,6 +130,11 @@ class CauseFitter:
             self.ahead[b] = got[b]
         return [self.cache[u.tobytes()] for u in us]
 
+    def known(self, values, cmp: Comparison) -> None:
+        """Enter the comparison of the cause at ``values`` when the caller already has it (a refit that starts
+        from the extended model itself): the fit's first point then needs no run."""
+        self.cache[np.clip(kind_of(self.start.candidate).to_unit(values), 0.0, 1.0).tobytes()] = cmp
+
     def _keep(self, u: np.ndarray, cmp: Comparison | None, why: str | None) -> None:
         """Enter an evaluated point in :attr:`cache` (a failed run: dropped with its reason)."""
         if cmp is None:
