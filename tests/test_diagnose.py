@@ -534,9 +534,9 @@ def test_share_below_the_noise_objective_with_a_loud_channel_is_measured_against
     assert quiet.to_json()["share_of"] is None
 
 
-def test_step_5c_keeps_the_best_point_of_both_paths(monkeypatch):
+def test_step_5c_keeps_the_best_point_of_all_paths(monkeypatch):
     """Step 5c (diagnose._nuisance_again) tries the nuisance refit, the speed found again on the refit's model,
-    and the speed found again on the model given, and keeps the point of least J among those that fit better
+    the joint refit with the named causes (last part), and the speed found again on the model given, and keeps the point of least J among those that fit better
     (diagnose._lower: J falls, and the chi-square or the deviance on the effective sample size falls with it).
     A logic check on hand-built residuals (the two nuisance steps replaced by fakes that return them). Group
     Q's sigma is read 5x low, as the reconstructed displacements' is (significance, "Known limits"). The model
@@ -554,6 +554,7 @@ def test_step_5c_keeps_the_best_point_of_both_paths(monkeypatch):
     from dataclasses import replace
     from types import SimpleNamespace
 
+    from orchestrator.inputs.causes import Candidate
     from orchestrator.inverse import nuisance
     from orchestrator.inverse.diagnose import _lower, _nuisance_again
     from orchestrator.inverse.nuisance import NuisanceFit
@@ -598,15 +599,35 @@ def test_step_5c_keeps_the_best_point_of_both_paths(monkeypatch):
         return _nuisance_again(SimpleNamespace(spare=0), SimpleNamespace(target=target), nz, {"model": "given"},
                                given)
 
-    fit, raw, cmp = run(refit, speed)
-    assert raw == {"model": "refit"} and cmp is refit and fit.refit == {"reason": "test"}
+    fit, raw, cmp, values = run(refit, speed)
+    assert raw == {"model": "refit"} and cmp is refit and fit.refit == {"reason": "test"} and values is None
     assert fit.speed_again is None and fit.runs == 40 + 9 + 2 + 2
     assert fit.notes[-1].endswith("kept the refit"), fit.notes
-    fit, raw, cmp = run(both, speed)
+    fit, raw, cmp, _ = run(both, speed)
     assert raw == {"model": "speed"} and cmp is speed and fit.refit is None and fit.runs == 53
-    fit, raw, cmp = run(both, point(0.11, 0.0))
+    fit, raw, cmp, _ = run(both, point(0.11, 0.0))
     assert raw == {"model": "given"} and cmp is given and fit.runs == 53
     assert "none fits better" in fit.notes[-1], fit.notes
+
+    # with a named cause, the joint refit of the nuisance values and the cause's parameters is a third path:
+    # its point (P's bump 3 %, Q at its noise: J and the chi-square fall, below the refit's J) is kept, with
+    # the cause's new values; the speed found again on its model (the ringing point) is not better
+    joint = point(0.03, 0.0)
+    assert joint.objective < refit.objective and _lower(joint, given, target.sigma)
+
+    def fake_joint(pool, tg, nz, causes, cmp):
+        assert cmp is given and [(s, list(v)) for _, s, v in causes] == [(19, [0.5])]
+        nz.runs += 8
+        return replace(nz, raw={"model": "refit"}, refit={"reason": "joint"}), joint, [np.array([0.7])]
+
+    monkeypatch.setattr(nuisance, "refit_jointly", fake_joint)
+    named = [SimpleNamespace(e=SimpleNamespace(candidate=Candidate("rail_pad_stiffness", 19), values=np.array([0.5])),
+                             refit=None)]
+    nz = NuisanceFit({"model": "given"}, {"speed": 30.0}, {"speed": 30.0}, {}, {}, {}, 0.0, given, 40)
+    fit, raw, cmp, values = _nuisance_again(SimpleNamespace(spare=0), SimpleNamespace(target=target), nz,
+                                            {"model": "given"}, given, named)
+    assert cmp is joint and fit.refit == {"reason": "joint"} and [list(v) for v in values] == [[0.7]]
+    assert fit.runs == 40 + (9 + 2) + (8 + 2) + 2 and fit.notes[-1].endswith("kept the joint refit"), fit.notes
 
 
 def test_interval_of_a_linear_fit_is_the_textbook_one():
@@ -773,3 +794,32 @@ def test_the_verdict_says_a_cause_was_fitted_again_after_the_nuisance_refit():
     words = _refit_words(c)
     assert "3.83" in words and "0.05054 → 0.04655" in words, words
     assert _refit_words(CauseFit("rail_pad_stiffness", {"stiffness_scale": 4.0}, 0.0778, 0.7, {})) == ""
+
+
+def test_a_channel_reading_round_off_is_normalised_as_a_constant_one():
+    """objective.channel_scales: a pressure cell whose record is round-off (1e-14 Pa about 0, as the solid
+    crossing rail's recovered pressure under a hanging sleeper reads: field-like case void_sensor+solid 7606)
+    is treated as an exactly constant cell is — the median spread of its group's live cells as its
+    normaliser, their median noise-to-spread ratio (objective.noise_sigma over the std) as its noise — while a
+    live cell of small spread (0.6 % of the group's largest, as in case two_void_pad 7101) keeps its own.
+    A check of the rule; the spreads' hand value: the std of a sine of amplitude a is a / sqrt(2)."""
+    from types import SimpleNamespace
+
+    from orchestrator.inverse.objective import channel_scales, noise_sigma
+
+    rng = np.random.default_rng(4)
+    t = np.arange(4000) * 2e-4
+    wave = np.sin(2 * np.pi * 25.0 * t)                 # 20 whole periods
+    ch = {"A1": 2000.0 * wave + rng.normal(0, 20.0, t.size), "A2": 1000.0 * wave + rng.normal(0, 10.0, t.size),
+          "A3": 1e-14 * rng.normal(size=t.size), "A4": np.zeros(t.size),
+          "A5": 12.0 * wave + rng.normal(0, 0.12, t.size)}
+    scale, sigma = channel_scales(SimpleNamespace(channels=ch), {k: "A" for k in ch})
+    live = ("A1", "A2", "A5")
+    median = float(np.median([np.std(ch[k]) for k in live]))
+    assert median == pytest.approx(1000.0 / np.sqrt(2), rel=2e-2)          # 2 %: the noise's share of the std
+    ratio = float(np.median([noise_sigma(ch[k]) / np.std(ch[k]) for k in live]))
+    for dead in ("A3", "A4"):
+        assert scale[dead] == pytest.approx(median, rel=1e-9), dead
+        assert sigma[dead] == pytest.approx(ratio * median, rel=1e-9), dead
+    assert scale["A5"] == pytest.approx(np.std(ch["A5"]), rel=1e-12)
+    assert sigma["A5"] == pytest.approx(noise_sigma(ch["A5"]), rel=1e-12)

@@ -84,9 +84,14 @@ module that applies it):
    by it. Then the speed: stage 1's warp again, on the extended model (a track effect that changes
    the signals' shape moves the warp of the nominal run: a global pad or a worn nose beside a
    vehicle mismatch left it 1.5 % and 3.9 % off), with a run at the new speed when it asks for
-   more than 0.1 % (:func:`orchestrator.inverse.nuisance.speed_again`). Both paths are tried,
-   side by side: the refit and then the speed on the refit's model, and the speed on the model
-   with the named causes as they were. Kept: the point of least J among those that fit better
+   more than 0.1 % (:func:`orchestrator.inverse.nuisance.speed_again`). And the joint refit
+   (:func:`orchestrator.inverse.nuisance.refit_jointly`): the same steps with the named causes'
+   parameters free too (~15 runs for a void), since a cause fitted on step 2's model and a vehicle
+   value that took up part of it are coupled and one pass of backfitting leaves both short
+   (measured, RESULTS session 29: void_off_sensor 7303, the wheelset mass at 1882 kg for a true
+   1500; J 0.0524 -> 0.0231 by the refit, 0.0204 jointly, the truth's own 0.0207). Three paths are
+   tried, side by side: the refit and then the speed on the refit's model, the joint refit and then
+   the speed on its model, and the speed on the model with the named causes as they were. Kept: the point of least J among those that fit better
    than that model (:func:`_lower`: J falls, and the chi-square *or* the deviance on the effective
    sample size falls with it). The reported nuisance estimates and the extended model are then
    that point's. Why both paths and this rule (RESULTS 2026-11-28, session 27, leads 1-2): before,
@@ -106,7 +111,9 @@ module that applies it):
    before. The cause had been fitted with stage 3's values, and its optimum moves with them
    (measured: pad_global 7303, the scale fitted 3.83 for a true 4.16; with step 5c's values J's
    minimum lies at 4.1-4.16). Voids (six gaps, ~50 runs a fit) are not fitted again. One pass:
-   the nuisance values are not fitted again after it.
+   the nuisance values are not fitted again after it. When step 5c kept the joint refit, each
+   cause starts from its joint value, and a cause the joint refit moved (a void too) carries that
+   value and its intervals there even when no refit here is kept.
 6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,
    identifiability and which sensors would pin it:
    :mod:`orchestrator.inverse.uncertainty`); else ``none`` when the residual is at the
@@ -139,7 +146,7 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -333,17 +340,21 @@ def _lower(cmp: Comparison, start: Comparison, sigma: dict) -> bool:
 
 
 def _nuisance_again(pool: Pool, inp: _Inputs, nz: NuisanceFit, ext_raw: dict,
-                    final: Comparison) -> tuple[NuisanceFit, dict, Comparison]:
+                    final: Comparison, named: Sequence[_Named] = ()) -> tuple[NuisanceFit, dict, Comparison,
+                                                                           list | None]:
     """Step 5c: the nuisance values fitted again on the model with the named causes, and its speed found
     again from the data — every path tried, the best point kept (module doc).
 
-    The points: the refit (:func:`orchestrator.inverse.nuisance.refit_with_causes`), the speed found again
-    on the refit's model and on the model given (:func:`orchestrator.inverse.nuisance.speed_again`), the two
-    paths side by side. Kept: the one of least J among those that fit better than the model given
-    (:func:`_lower`). Output: the nuisance estimates, the extended raw scenario and its comparison (those
-    given when no point fits better); the estimates' notes say what each path gave and which was kept.
+    The points: the refit (:func:`orchestrator.inverse.nuisance.refit_with_causes`), the joint refit of the
+    nuisance values with the ``named`` causes' parameters (:func:`orchestrator.inverse.nuisance.refit_jointly`),
+    the speed found again on either's model and on the model given
+    (:func:`orchestrator.inverse.nuisance.speed_again`), the three paths side by side. Kept: the one of least
+    J among those that fit better than the model given (:func:`_lower`). Output: the nuisance estimates, the
+    extended raw scenario and its comparison (those given when no point fits better), and the named causes'
+    values when the point kept is the joint refit's (else None); the estimates' notes say what each path gave
+    and which was kept.
     """
-    from orchestrator.inverse.nuisance import refit_with_causes, speed_again
+    from orchestrator.inverse.nuisance import refit_jointly, refit_with_causes, speed_again
 
     def refit_path() -> tuple[list, int]:
         mine = copy.deepcopy(nz)
@@ -351,45 +362,62 @@ def _nuisance_again(pool: Pool, inp: _Inputs, nz: NuisanceFit, ext_raw: dict,
         if got is None:
             return [], mine.runs - nz.runs
         fit, cmp = got
-        points = [("the refit", fit, fit.raw, cmp)]
+        points = [("the refit", fit, fit.raw, cmp, None)]
         sp = speed_again(pool, inp.target, copy.deepcopy(fit), fit.raw, cmp)
         if sp is not None:
-            points.append(("the refit, then the speed", *sp))
+            points.append(("the refit, then the speed", *sp, None))
+        return points, points[-1][1].runs - nz.runs
+
+    def joint_path() -> tuple[list, int]:
+        mine = copy.deepcopy(nz)
+        causes = [(kind_of(n.e.candidate), n.e.candidate.sleeper, n.refit.values if n.refit is not None
+                   else n.e.values) for n in named]
+        got = refit_jointly(pool, inp.target, mine, causes, final) if causes else None
+        if got is None:
+            return [], mine.runs - nz.runs
+        fit, cmp, values = got
+        points = [("the joint refit", fit, fit.raw, cmp, values)]
+        sp = speed_again(pool, inp.target, copy.deepcopy(fit), fit.raw, cmp)
+        if sp is not None:
+            points.append(("the joint refit, then the speed", *sp, values))
         return points, points[-1][1].runs - nz.runs
 
     def speed_path() -> tuple[list, int]:
         mine = copy.deepcopy(nz)
         sp = speed_again(pool, inp.target, mine, ext_raw, final)
-        return ([("the speed", *sp)] if sp is not None else []), mine.runs - nz.runs
+        return ([("the speed", *sp, None)] if sp is not None else []), mine.runs - nz.runs
 
-    got = side_by_side(pool, {"refit": refit_path, "speed": speed_path})
-    points = got["refit"][0] + got["speed"][0]
-    runs = nz.runs + got["refit"][1] + got["speed"][1]
+    got = side_by_side(pool, {"refit": refit_path, "joint": joint_path, "speed": speed_path})
+    points = got["refit"][0] + got["joint"][0] + got["speed"][0]
+    runs = nz.runs + got["refit"][1] + got["joint"][1] + got["speed"][1]
     better = [p for p in points if _lower(p[3], final, inp.target.sigma)]
     tried = "; ".join(f"{name}: J {final.objective:.4g} -> {cmp.objective:.4g}, chi-square {final.chi2:.4g} -> "
-                      f"{cmp.chi2:.4g}" for name, _, _, cmp in points)
+                      f"{cmp.chi2:.4g}" for name, _, _, cmp, _ in points)
     if not better:
         nz.runs = runs
         if points:
             nz.notes.append(f"nuisance again with the named causes ({tried}): none fits better; stage 3's values "
                             "and the speed stand")
-        return nz, ext_raw, final
-    name, fit, raw, cmp = min(better, key=lambda p: p[3].objective)
+        return nz, ext_raw, final, None
+    name, fit, raw, cmp, values = min(better, key=lambda p: p[3].objective)
     fit.runs = runs
     fit.notes.append(f"nuisance again with the named causes ({tried}): kept {name}")
-    return fit, raw, cmp
+    return fit, raw, cmp, values
 
 
 def _causes_again(pool: Pool, inp: _Inputs, named: list[_Named], entries: list[CauseFit], nz: NuisanceFit,
                   ext_raw: dict, final: Comparison) -> tuple[dict, Comparison]:
-    """Step 5d: each named one-parameter cause fitted again on the model of step 5c, when step 5c moved it.
+    """Step 5d: each named one-parameter cause fitted again on the model of step 5c, when step 5c moved it;
+    a cause step 5c's joint refit moved takes its values from there.
 
     The causes were fitted with stage 3's nuisance values; step 5c moves those, and the cause's optimum
-    moves with them (module doc, 5d). From its current value, on the extended model with step 5c's values
-    and time shift, the finest stage of the cause's fit (:meth:`orchestrator.inverse.selection.CauseFitter.fit`);
-    kept by step 5c's rule (:func:`_lower`). A kept refit sets the entry's parameters, its intervals at them
-    (on this model) and ``evidence.refit_nuisance`` (the values before, J before and after). Output: the
-    extended raw scenario and its comparison.
+    moves with them (module doc, 5d). From its current value (the joint refit's, when step 5c kept that),
+    on the extended model with step 5c's values and time shift, the finest stage of the cause's fit
+    (:meth:`orchestrator.inverse.selection.CauseFitter.fit`); kept by step 5c's rule (:func:`_lower`). A
+    void's six gaps are not fitted again here (~50 runs for at most 1.6 points of gain: RESULTS, session 28).
+    A cause whose values moved — by the joint refit, this fit, or both — has its entry's parameters set, its
+    intervals taken at them (on this model) and ``evidence.refit_nuisance`` (the values before, J before and
+    after). Output: the extended raw scenario and its comparison.
     """
     from orchestrator.inverse.uncertainty import cause_uncertainty
 
@@ -398,23 +426,32 @@ def _causes_again(pool: Pool, inp: _Inputs, named: list[_Named], entries: list[C
     own = replace(inp.target, shift=final.shift)
     for n, entry in zip(named, entries):
         c, kind = n.e.candidate, kind_of(n.e.candidate)
-        if len(kind.names) != 1:
-            continue
-        values = n.refit.values if n.refit is not None else n.e.values
+        before = n.refit.values if n.refit is not None else n.e.values
+        values = n.joint if n.joint is not None else before
         start = Evaluated(c, values, final, n.e.k, "fitted")
         fitter = CauseFitter(pool, own, ext_raw, start, final)
         fitter.known(values, final)
-        pool.expect(2 * FINE_MAX_NFEV)
-        got = fitter.fit(start, slice(0, None), FINE_MAX_NFEV)
-        if not _lower(got.cmp, final, inp.target.sigma):
+        got = None
+        if len(kind.names) == 1:
+            pool.expect(2 * FINE_MAX_NFEV)
+            got = fitter.fit(start, slice(0, None), FINE_MAX_NFEV)
+            got = got if _lower(got.cmp, final, inp.target.sigma) else None
+        if got is None and n.joint is None:
             continue
+        was = n.joint_from if n.joint is not None else final
+        new, cmp = (got.values, got.cmp) if got is not None else (values, final)
+        reason = {(True, False): "fitted jointly with the nuisance values in step 5c",
+                  (True, True): "fitted jointly with the nuisance values in step 5c, then again alone on that model",
+                  (False, True): "fitted again on the model with the nuisance values of step 5c"}[
+            (n.joint is not None, got is not None)]
         entry.evidence["refit_nuisance"] = {
-            "parameters_before": kind.parameters(values), "objective_before": final.objective,
-            "objective_after": got.cmp.objective, "chi2_before": final.chi2, "chi2_after": got.cmp.chi2,
-            "runs": len(fitter.cache) - 1, "reason": "fitted again on the model with the nuisance values of step 5c"}
-        entry.parameters = kind.parameters(got.values)
-        entry.uncertainty = cause_uncertainty(fitter, got.values, n.evidence.n_eff)
-        ext_raw, final = kind.apply(ext_raw, c.sleeper, got.values), got.cmp
+            "parameters_before": kind.parameters(before), "objective_before": was.objective,
+            "objective_after": cmp.objective, "chi2_before": was.chi2, "chi2_after": cmp.chi2,
+            "runs": len(fitter.cache) - 1, "reason": reason}
+        entry.parameters = kind.parameters(new)
+        entry.uncertainty = cause_uncertainty(fitter, new, n.evidence.n_eff)
+        if got is not None:
+            ext_raw, final = kind.apply(ext_raw, c.sleeper, got.values), got.cmp
     return ext_raw, final
 
 
@@ -433,9 +470,12 @@ def _named_and_nuisance_again(pool: Pool, inp: _Inputs, named: list[_Named], nz:
     reach = (min(local), max(local)) if local else (-1, -1)
     calls = {"entries": lambda: [_named_entry(n, i + 1, reach) for i, n in enumerate(named)]}
     if named:
-        calls["again"] = lambda: _nuisance_again(pool, inp, nz, ext_raw, final)
+        calls["again"] = lambda: _nuisance_again(pool, inp, nz, ext_raw, final, named)
     got = side_by_side(pool, calls)
-    return (got["entries"], *got.get("again", (nz, ext_raw, final)))
+    nz_new, raw_new, final_new, joint = got.get("again", (nz, ext_raw, final, None))
+    for n, v in zip(named, joint or ()):
+        n.joint, n.joint_from = np.asarray(v, float), final
+    return got["entries"], nz_new, raw_new, final_new
 
 
 def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> Callable[[], dict | None]:
@@ -501,6 +541,8 @@ class _Named:
     refit: Evaluated | None = None       # step 5b: refitted with the other cause (None: not refitted / no better)
     refit_fitter: CauseFitter | None = None
     refit_from: float | None = None      # J of the extended model before this refit
+    joint: np.ndarray | None = None      # step 5c: its values from the joint refit with the nuisance values (kept)
+    joint_from: Comparison | None = None  # the extended model's comparison before step 5c
 
 
 def _preferred(rd: Round, pick: Evaluated, tried: dict) -> list[Candidate]:

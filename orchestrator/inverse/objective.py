@@ -30,6 +30,8 @@ from track.sensors import displacement_from_acceleration
 
 MAD_TO_SIGMA = 1.4826   # sigma / MAD of a normal distribution
 NOISE_FLOOR = 1e-12     # relative to the channel's std: keeps chi-square finite for noise-free data
+DEAD_SPREAD = 1e-9      # a channel whose spread is at most this share of its group's largest is constant: the
+                        # measured file's 12 digits resolve ~1e-12 of a value, a sensor's noise ~1e-3 of its range
 
 
 @dataclass
@@ -209,7 +211,11 @@ def channel_scales(measured, groups: dict) -> tuple[dict, dict]:
     throughout) has no spread of its own: it is normalised by the median spread of its
     group (same sensor type, same unit), and its noise level is the group's median
     noise-to-spread ratio times that. Without this one dead channel would make J
-    infinite and the chi-square undefined.
+    infinite and the chi-square undefined. Constant means a spread of at most
+    :data:`DEAD_SPREAD` of the group's largest: a cell reading round-off, not a signal
+    (measured: the solid crossing rail's recovered pressure under a hanging sleeper,
+    ~1e-14 Pa, 4e-17 of its group's spread, made the nominal J 1.4e15 and every gain
+    100 %: field-like case void_sensor+solid 7606, RESULTS session 29).
 
     Returns
     -------
@@ -221,12 +227,16 @@ def channel_scales(measured, groups: dict) -> tuple[dict, dict]:
         ok = np.isfinite(m)
         scale[k] = float(np.std(m[ok])) if ok.sum() > 1 else 0.0
         sigma[k] = noise_sigma(m)
+    spread = dict(scale)
     for k in list(scale):
-        peers = [j for j in scale if groups.get(j) == groups.get(k) and scale[j] > 0]
-        if scale[k] <= 0:
-            scale[k] = float(np.median([scale[j] for j in peers])) if peers else 1.0
-        if not (np.isfinite(sigma[k]) and sigma[k] > 0):
-            ratios = [sigma[j] / scale[j] for j in peers if np.isfinite(sigma[j]) and sigma[j] > 0]
+        group = [spread[j] for j in spread if groups.get(j) == groups.get(k)]
+        live = [j for j in spread if groups.get(j) == groups.get(k) and spread[j] > DEAD_SPREAD * max(group)
+                and spread[j] > 0]
+        dead = k not in live
+        if dead:
+            scale[k] = float(np.median([spread[j] for j in live])) if live else 1.0
+        if dead or not (np.isfinite(sigma[k]) and sigma[k] > 0):
+            ratios = [sigma[j] / spread[j] for j in live if np.isfinite(sigma[j]) and sigma[j] > 0]
             sigma[k] = scale[k] * (float(np.median(ratios)) if ratios else 0.01)
     return scale, sigma
 
