@@ -313,7 +313,7 @@ def test_dask_reschedules_a_run_whose_worker_died(tmp_path, dask_cluster):
     res = sweep.run_sweep(DEFAULT_SCENARIO, variations, tmp_path / "out", run_fn=counted(killing_run, tmp_path),
                           scheduler=dask_cluster.scheduler_address, progress=False)
     plan = sweep.plan_sweep(DEFAULT_SCENARIO, variations)
-    assert (res.done, res.failed) == (6, 0)
+    assert (res.done, res.failed) == (6, 0), res.errors
     assert [r["run_id"] for r in res.rows] == [r.run_id for r in plan.runs]
     assert calls(tmp_path)[plan.runs[-1].run_id] == 2
     assert not (tmp_path / "out" / "runs" / plan.runs[-1].run_id / "partial.txt").exists()
