@@ -536,7 +536,8 @@ def test_share_below_the_noise_objective_with_a_loud_channel_is_measured_against
 
 def test_step_5c_keeps_the_best_point_of_all_paths(monkeypatch):
     """Step 5c (diagnose._nuisance_again) tries the nuisance refit, the speed found again on the refit's model,
-    the joint refit with the named causes (last part), and the speed found again on the model given, and keeps the point of least J among those that fit better
+    the joint refit with the named causes (last part), and the speed found again on the model given, and
+    keeps the point of least J among those that fit better
     (diagnose._lower: J falls, and the chi-square or the deviance on the effective sample size falls with it).
     A logic check on hand-built residuals (the two nuisance steps replaced by fakes that return them). Group
     Q's sigma is read 5x low, as the reconstructed displacements' is (significance, "Known limits"). The model
@@ -621,8 +622,7 @@ def test_step_5c_keeps_the_best_point_of_all_paths(monkeypatch):
         return replace(nz, raw={"model": "refit"}, refit={"reason": "joint"}), joint, [np.array([0.7])]
 
     monkeypatch.setattr(nuisance, "refit_jointly", fake_joint)
-    named = [SimpleNamespace(e=SimpleNamespace(candidate=Candidate("rail_pad_stiffness", 19), values=np.array([0.5])),
-                             refit=None)]
+    named = [SimpleNamespace(e=SimpleNamespace(candidate=Candidate("rail_pad_stiffness", 19)), values=np.array([0.5]))]
     nz = NuisanceFit({"model": "given"}, {"speed": 30.0}, {"speed": 30.0}, {}, {}, {}, 0.0, given, 40)
     fit, raw, cmp, values = _nuisance_again(SimpleNamespace(spare=0), SimpleNamespace(target=target), nz,
                                             {"model": "given"}, given, named)
@@ -819,7 +819,8 @@ def test_a_channel_reading_round_off_is_normalised_as_a_constant_one():
     assert median == pytest.approx(1000.0 / np.sqrt(2), rel=2e-2)          # 2 %: the noise's share of the std
     ratio = float(np.median([noise_sigma(ch[k]) / np.std(ch[k]) for k in live]))
     for dead in ("A3", "A4"):
+        # rel 1e-9: the same arithmetic on the same numbers, only the summation order may differ
         assert scale[dead] == pytest.approx(median, rel=1e-9), dead
         assert sigma[dead] == pytest.approx(ratio * median, rel=1e-9), dead
-    assert scale["A5"] == pytest.approx(np.std(ch["A5"]), rel=1e-12)
+    assert scale["A5"] == pytest.approx(np.std(ch["A5"]), rel=1e-12)       # its own std, unchanged
     assert sigma["A5"] == pytest.approx(noise_sigma(ch["A5"]), rel=1e-12)

@@ -446,7 +446,9 @@ def test_a_named_pad_fitted_again_after_the_nuisance_refit(sc, pool, tmp_path):
     # step 5c's joint path (nuisance.refit_jointly): from the same start, the nuisance values and the scale
     # fitted together reach a lower J than the alternation above (step 5c's refit, then step 5d), the scale
     # and the wheelset mass within the stage-3 tolerance of their truths (MASS_RTOL: the mass is the value
-    # stage 3 took the pads' effect into; the scale is held to the same 1 %), the wheelset's interval holding
+    # stage 3 took the pads' effect into; the scale is held to the same 1 %, ten times its measured error and
+    # a fifth of the distance from the truth (2.0) to the scale fitted on stage 3's model, 1.89 — so it fails
+    # when the joint steps leave the scale where stage 3 put it), the wheelset's interval holding
     # its truth, and the extended model carries the joint scale. Measured: scale 1.998, mass 1349 kg, J
     # 0.0196 in 10 runs, against 1.980 and J 0.0202 by steps 5c and 5d (~20 runs).
     import copy

@@ -370,8 +370,7 @@ def _nuisance_again(pool: Pool, inp: _Inputs, nz: NuisanceFit, ext_raw: dict,
 
     def joint_path() -> tuple[list, int]:
         mine = copy.deepcopy(nz)
-        causes = [(kind_of(n.e.candidate), n.e.candidate.sleeper, n.refit.values if n.refit is not None
-                   else n.e.values) for n in named]
+        causes = [(kind_of(n.e.candidate), n.e.candidate.sleeper, n.values) for n in named]
         got = refit_jointly(pool, inp.target, mine, causes, final) if causes else None
         if got is None:
             return [], mine.runs - nz.runs
@@ -426,7 +425,7 @@ def _causes_again(pool: Pool, inp: _Inputs, named: list[_Named], entries: list[C
     own = replace(inp.target, shift=final.shift)
     for n, entry in zip(named, entries):
         c, kind = n.e.candidate, kind_of(n.e.candidate)
-        before = n.refit.values if n.refit is not None else n.e.values
+        before = n.values
         values = n.joint if n.joint is not None else before
         start = Evaluated(c, values, final, n.e.k, "fitted")
         fitter = CauseFitter(pool, own, ext_raw, start, final)
@@ -543,6 +542,11 @@ class _Named:
     refit_from: float | None = None      # J of the extended model before this refit
     joint: np.ndarray | None = None      # step 5c: its values from the joint refit with the nuisance values (kept)
     joint_from: Comparison | None = None  # the extended model's comparison before step 5c
+
+    @property
+    def values(self) -> np.ndarray:
+        """Its values as step 5b left them (the refit's, when one was kept)."""
+        return self.refit.values if self.refit is not None else self.e.values
 
 
 def _preferred(rd: Round, pick: Evaluated, tried: dict) -> list[Candidate]:

@@ -610,13 +610,24 @@ class _Runs:
     def shift(self, u) -> float:
         return self.s0 + (2.0 * float(u[-1]) - 1.0) * SHIFT_BOX
 
+    def cause_values(self, p: np.ndarray) -> list:
+        """Each cause's values (scenario units) at the point ``p`` (with or without its shift)."""
+        values, i = [], len(self.box.names)
+        for kind, _, n in self.causes:
+            values.append(kind.from_unit(p[i:i + n]))
+            i += n
+        return values
+
+    def with_causes(self, p: np.ndarray) -> dict:
+        """``raw`` with the causes' values of the point ``p`` applied (the box's values not)."""
+        raw = self.raw
+        for (kind, sleeper, _), v in zip(self.causes, self.cause_values(p)):
+            raw = kind.apply(raw, sleeper, v)
+        return raw
+
     def scenario(self, p: np.ndarray) -> dict:
         """The raw scenario of a point without its shift: the causes' values, then the box's."""
-        raw, i = self.raw, len(self.box.names)
-        for kind, sleeper, n in self.causes:
-            raw = kind.apply(raw, sleeper, kind.from_unit(p[i:i + n]))
-            i += n
-        return self.box.apply(raw, self.box.values(p[:len(self.box.names)]))
+        return self.box.apply(self.with_causes(p), self.box.values(p[:len(self.box.names)]))
 
     def comparisons(self, us: list) -> list:
         us = [np.clip(np.asarray(u, float), 0.0, 1.0) for u in us]
@@ -855,25 +866,58 @@ def refit_with_causes(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     veh = nz.stage3
     if veh is None or veh.box is None or not veh.box.names:
         return None
-    box = veh.box
-    free = np.array([n != "speed" for n in box.names] + [True])
+    st = _stage4_steps(pool, target, veh, raw_ext, start)
+    nz.runs += st.rn.runs
+    refit = _refit_record(nz, st.refitted_names(), start, st.cmp, st.rn.runs, st.notes,
+                          "fitted again on the model with the named causes")
+    return _refitted(nz, st, refit), st.cmp
+
+
+@dataclass
+class _Stage4:
+    """Stage 4's steps done (:func:`_stage4_steps`): ``u`` the final point (box, causes, shift); ``keep``,
+    ``free`` of the box's entries; ``lo``, ``hi`` the intervals of the box's entries and the shift."""
+
+    rn: _Runs
+    u: np.ndarray
+    keep: np.ndarray
+    free: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    notes: list
+    cmp: Comparison
+
+    def refitted_names(self) -> list:
+        return [n for n, f in zip(self.rn.box.names, self.free) if f]
+
+
+def _stage4_steps(pool, target: Target, veh: _VehicleFit, raw: dict, start: Comparison,
+                  causes: Sequence = (), cause_units: Sequence = ()) -> _Stage4:
+    """The steps of :func:`refit_with_causes` and :func:`refit_jointly`: from stage 3's point (the box's
+    values, then ``cause_units``: each cause's unit-cube values, then the shift of ``target``) on ``raw``
+    (the extended scenario, or with ``causes`` ``(kind, sleeper, n)`` the scenario they are applied to),
+    a forward-difference Jacobian over every entry but the speed, :data:`REFIT_STEPS` Broyden-updated
+    Gauss-Newton steps, stage 3's acceptance of the box's values on that Jacobian (the causes' entries
+    counted in the intervals), the values not accepted at nominal (one more run when that moves the point)."""
+    box, nb = veh.box, len(veh.box.names)
     own = replace(target)   # its shift moves with the refit's
-    rn = _Runs(pool, own, box.apply(raw_ext, box.nominal), box)
-    u, r, cmp = veh.u.copy(), own.weighted_residuals(start), start
+    rn = _Runs(pool, own, box.apply(raw, box.nominal), box, causes)
+    u = np.concatenate([veh.u[:-1], *cause_units, [0.5]])      # veh.u's shift is 0.5: ``target``'s
+    free = np.concatenate([[n != "speed" for n in box.names], np.ones(u.size - nb, bool)])
+    r = own.weighted_residuals(start)
     pool.expect(int(free.sum()) + REFIT_STEPS)
-    J, u, r, cmp = _broyden_steps(rn, _jacobian_at(rn, u, r, free), u, r, cmp, free)
+    J, u, r, cmp = _broyden_steps(rn, _jacobian_at(rn, u, r, free), u, r, start, free)
+    own_entries = np.r_[np.arange(nb), u.size - 1]          # the box's entries and the shift
     notes: list[str] = []
     lo, hi = _intervals(J, r, u, cmp)
-    keep = _accepted(box, u, lo, hi, notes) & free[:-1]
+    keep = _accepted(box, u[own_entries], lo[own_entries], hi[own_entries], notes) & free[:nb]
     notes = [t for t in notes if not t.startswith("speed:")]     # not refitted: stage 3's judgement stands
     lo, hi = _reported(J, r, u, lo, hi, own, cmp)
-    u_final = np.append(np.where(keep | ~free[:-1], u[:-1], np.clip(box.unit(box.nominal), 0.0, 1.0)), u[-1])
+    u_final = u.copy()
+    u_final[:nb] = np.where(keep | ~free[:nb], u[:nb], np.clip(box.unit(box.nominal), 0.0, 1.0))
     if not np.array_equal(u_final, u):
         cmp = rn.comparisons([u_final])[0]
-    nz.runs += rn.runs
-    refit = _refit_record(nz, [n for n, f in zip(box.names, free) if f], start, cmp, rn.runs, notes,
-                          "fitted again on the model with the named causes")
-    return _refitted(nz, rn, keep, free, u_final, lo, hi, refit), cmp
+    return _Stage4(rn, u_final, keep, free[:nb], lo[own_entries], hi[own_entries], notes, cmp)
 
 
 def _refit_record(nz: NuisanceFit, names: list, start: Comparison, cmp: Comparison, runs: int, notes: list,
@@ -914,53 +958,25 @@ def refit_jointly(pool, target: Target, nz: NuisanceFit, causes: list,
     veh = nz.stage3
     if veh is None or veh.box is None or not veh.box.names or not causes:
         return None
-    box, nb = veh.box, len(veh.box.names)
-    cu = [np.clip(kind.to_unit(np.asarray(v, float)), 0.0, 1.0) for kind, _, v in causes]
-    spec = [(kind, sleeper, c.size) for (kind, sleeper, _), c in zip(causes, cu)]
-    own = replace(target)
-    rn = _Runs(pool, own, box.apply(nz.raw, box.nominal), box, spec)
-    # the model given: its box values (stage 3's accepted ones, the refused at nominal) and the shift of ``target``
-    ub = np.clip(box.unit(np.array([nz.values[n] for n in box.names], float)), 0.0, 1.0)
-    u = np.concatenate([ub, *cu, [0.5]])
-    free = np.concatenate([[n != "speed" for n in box.names], np.ones(u.size - nb, bool)])
-    r = own.weighted_residuals(start)
-    pool.expect(int(free.sum()) + REFIT_STEPS)
-    J, u, r, cmp = _broyden_steps(rn, _jacobian_at(rn, u, r, free), u, r, start, free)
-    sel = np.r_[np.arange(nb), u.size - 1]          # the box's entries and the shift
-    notes: list[str] = []
-    lo, hi = _intervals(J, r, u, cmp)
-    keep = _accepted(box, u[sel], lo[sel], hi[sel], notes) & free[:nb]
-    notes = [t for t in notes if not t.startswith("speed:")]
-    lo, hi = _reported(J, r, u, lo, hi, own, cmp)
-    u_final = u.copy()
-    u_final[:nb] = np.where(keep | ~free[:nb], u[:nb], np.clip(box.unit(box.nominal), 0.0, 1.0))
-    if not np.array_equal(u_final, u):
-        cmp = rn.comparisons([u_final])[0]
-    nz.runs += rn.runs
-    values, i = [], nb
-    for kind, _, n in spec:
-        values.append(kind.from_unit(u_final[i:i + n]))
-        i += n
-    ext = rn.raw
-    for (kind, sleeper, _), v in zip(spec, values):
-        ext = kind.apply(ext, sleeper, v)
-    refit = {**_refit_record(nz, [n for n, f in zip(box.names, free[:nb]) if f], start, cmp, rn.runs, notes,
+    units = [np.clip(kind.to_unit(np.asarray(v, float)), 0.0, 1.0) for kind, _, v in causes]
+    spec = [(kind, sleeper, c.size) for (kind, sleeper, _), c in zip(causes, units)]
+    st = _stage4_steps(pool, target, veh, nz.raw, start, spec, units)
+    nz.runs += st.rn.runs
+    refit = {**_refit_record(nz, st.refitted_names(), start, st.cmp, st.rn.runs, st.notes,
                              "fitted again jointly with the named causes' parameters"),
              "causes": [kind.name for kind, _, _ in spec]}
-    fit = _refitted(nz, rn, keep, free[sel], u_final[sel], lo[sel], hi[sel], refit, ext)
-    return fit, cmp, values
+    return _refitted(nz, st, refit), st.cmp, st.rn.cause_values(st.u)
 
 
-def _refitted(nz: NuisanceFit, rn: _Runs, keep: np.ndarray, free: np.ndarray, u_final: np.ndarray, lo: np.ndarray,
-              hi: np.ndarray, refit: dict, raw: dict | None = None) -> NuisanceFit:
+def _refitted(nz: NuisanceFit, st: _Stage4, refit: dict) -> NuisanceFit:
     """The :class:`NuisanceFit` of a kept stage-4 refit: its accepted values applied to the extended scenario
-    (``rn.raw``, or ``raw`` when given: every box value at nominal; the speed as stage 3 left it), its values,
-    intervals and acceptance over stage 3's for the refitted names, the shift of ``u_final`` (box entries, then
-    the shift: a joint refit's causes are not in ``u_final``, ``lo``, ``hi``)."""
-    box = rn.box
-    values = dict(zip(box.names, box.values(u_final[:-1])))
+    (``st.rn.raw`` with the causes' values of ``st.u`` — a joint refit's — applied: every box value at nominal;
+    the speed as stage 3 left it), its values, intervals and acceptance over stage 3's for the refitted names,
+    the shift of ``st.u``."""
+    box, keep, free, lo, hi = st.rn.box, st.keep, st.free, st.lo, st.hi
+    values = dict(zip(box.names, box.values(st.u[:len(box.names)])))
     lo_v, hi_v = box.values(lo[:-1]), box.values(hi[:-1])
-    raw = box.apply(rn.raw if raw is None else raw, [values[n] for n, k in zip(box.names, keep) if k],
+    raw = box.apply(st.rn.with_causes(st.u), [values[n] for n, k in zip(box.names, keep) if k],
                     [n for n, k in zip(box.names, keep) if k])
     if "speed" in box.names:       # the speed, as stage 3 left it
         raw = box.apply(raw, [nz.values["speed"]], ["speed"])
@@ -968,9 +984,9 @@ def _refitted(nz: NuisanceFit, rn: _Runs, keep: np.ndarray, free: np.ndarray, u_
                                            for i, (n, k) in enumerate(zip(box.names, keep)) if free[i]}},
                       nz.nominal,
                       {**nz.intervals, **{n: [float(a), float(b)] for n, a, b, f in zip(box.names, lo_v, hi_v, free)
-                                          if f}, "shift": [rn.shift([lo[-1]]), rn.shift([hi[-1]])]},
+                                          if f}, "shift": [st.rn.shift([lo[-1]]), st.rn.shift([hi[-1]])]},
                       {**nz.identifiable, **{n: bool(k) for n, k, f in zip(box.names, keep, free) if f}},
-                      nz.channel_gains, rn.shift(u_final), nz.cmp, nz.runs, nz.notes, refit, nz.stage3)
+                      nz.channel_gains, st.rn.shift(st.u), nz.cmp, nz.runs, nz.notes, refit, nz.stage3)
     return out
 
 

@@ -228,11 +228,13 @@ def channel_scales(measured, groups: dict) -> tuple[dict, dict]:
         scale[k] = float(np.std(m[ok])) if ok.sum() > 1 else 0.0
         sigma[k] = noise_sigma(m)
     spread = dict(scale)
+    largest: dict = {}
+    for k, v in spread.items():
+        largest[groups.get(k)] = max(largest.get(groups.get(k), 0.0), v)
+    alive = {k for k, v in spread.items() if v > DEAD_SPREAD * largest[groups.get(k)]}   # 0 when all are
     for k in list(scale):
-        group = [spread[j] for j in spread if groups.get(j) == groups.get(k)]
-        live = [j for j in spread if groups.get(j) == groups.get(k) and spread[j] > DEAD_SPREAD * max(group)
-                and spread[j] > 0]
-        dead = k not in live
+        live = [j for j in alive if groups.get(j) == groups.get(k)]
+        dead = k not in alive
         if dead:
             scale[k] = float(np.median([spread[j] for j in live])) if live else 1.0
         if dead or not (np.isfinite(sigma[k]) and sigma[k] > 0):
