@@ -19,7 +19,7 @@ with the same model mismatch (vehicle, speed, damping, time step) — and return
   reconstruction of the accelerations' difference);
 * the **noise** ``n_c``: the white + coloured noise and drift the case's own chain put on
   the measured record (:func:`~orchestrator.inverse.fieldlike.disturbance`, scaled by the
-  std of the with-effect signal, times the channel's gain, reconstructed for displacement
+  std of the with-effect signal or its sensor kind's floor, :func:`~orchestrator.inverse.fieldlike.noise_scales`, times the channel's gain, reconstructed for displacement
   channels), i.e. exactly what ``apply_chain`` adds to the noise-free record;
 * the **signature-to-noise ratio** ``rho_c = sum(d_c^2) / sum(n_c^2)``, and over the
   channels its plain mean and its maximum.
@@ -63,7 +63,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from orchestrator.inputs.sensor_layout import layout_of
-from orchestrator.inverse.fieldlike import Chain, FieldCase, disturbance, gain_and_reconstruct
+from orchestrator.inverse.fieldlike import Chain, FieldCase, disturbance, gain_and_reconstruct, noise_scales
 from orchestrator.inverse.synthetic import (acquisition_rate, acquisition_times, sample_signals, truth_run,
                                             variant_scenario)
 
@@ -179,12 +179,13 @@ def chain_noise(sampled: dict, types: dict, dt: float, highpass: float, chain: C
     """The chain's noise realisation per channel: white + coloured + drift, as the measured record carries it.
 
     Written from :func:`~orchestrator.inverse.fieldlike.disturbance` (channel number =
-    position in ``sampled``, scale = the channel's std), times the faulty channel's gain,
+    position in ``sampled``, scale = :func:`~orchestrator.inverse.fieldlike.noise_scales`), times the faulty channel's gain,
     reconstructed for displacement channels — the same as ``apply_chain(sampled)`` minus
     ``apply_chain`` of a chain without noise and drift (tests/test_detectability.py checks it).
     """
-    return {sid: gain_and_reconstruct(sid, disturbance(chain, index, len(x), dt, float(np.std(x))), types, dt,
-                                      highpass, chain)
+    scales = noise_scales(sampled, types, chain)
+    return {sid: gain_and_reconstruct(sid, disturbance(chain, index, len(x), dt, scales[sid]), types, dt, highpass,
+                                      chain)
             for index, (sid, x) in enumerate(sampled.items())}
 
 

@@ -24,7 +24,10 @@ What that makes of the measurement scenario's channels (measured on one draw, se
 acceleration channels carry ~3 % of their std; the reconstructed sleeper displacements
 5-14 %, since the reconstruction's 1 / (2 pi f)^2 lifts the low-frequency part of the
 acceleration noise (the ranges below were halved after that draw). Over a record of
-0.14 s a sub-Hz drift is mostly an offset and a slope of each channel.
+0.14 s a sub-Hz drift is mostly an offset and a slope of each channel. A sensor kind has a
+noise floor (:data:`KIND_FLOOR`, :func:`noise_scales`, since 2026-11-28): a channel quieter
+than its kind's median carries the median's absolute noise, as a sensor of the same
+specification would.
 
 Families (:data:`FAMILIES`; every single-effect family also as ``<name>+mismatch``)::
 
@@ -90,6 +93,7 @@ FAULTY_DRIFT = (0.01, 0.03)    # ... and in the faulty chain
 DRIFT_HZ = (0.1, 1.0)          # drift frequency [Hz], below the reconstruction's high-pass corner (5 Hz)
 GAIN_ERROR = ((0.85, 0.95), (1.05, 1.15))   # the faulty channel's gain
 OFFSET = (0.02, 0.08)          # the faulty channel's offset / its std (not on displacement channels)
+KIND_FLOOR = 1.0               # a channel's noise scale is at least this share of its sensor kind's median std
 
 VEHICLE_MISMATCH = {           # vehicle kind -> (its parameter class, the parameters a case varies)
     "quarter": (QuarterParams, ("wheelset_mass", "k1", "c1")),
@@ -167,6 +171,11 @@ class Chain:
         Its gain.
     offset : float
         Its offset / its std (0 on displacement channels: the reconstruction removes it).
+    kind_floor : float
+        The noise floor of a sensor kind: a channel's noise and drift scale with its own std,
+        but not below this share of the median std of the channels of its kind
+        (:func:`noise_scales`). 0: each channel's own std (every passage written before
+        2026-11-28 12:30; their ``case.json`` has no such key).
     """
 
     seed: int
@@ -178,6 +187,7 @@ class Chain:
     gain_channel: str | None = None
     gain: float = 1.0
     offset: float = 0.0
+    kind_floor: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -229,6 +239,24 @@ def disturbance(chain: Chain, index: int, n: int, dt: float, scale: float) -> np
     return white + coloured + chain.drift * scale * np.sin(2.0 * np.pi * f * dt * np.arange(n) + phase)
 
 
+def noise_scales(sampled: dict, types: dict, chain: Chain) -> dict:
+    """Channel id -> the scale of its disturbance (:func:`disturbance`): the channel's std, but at
+    least ``chain.kind_floor`` times the median std of the channels of its sensor type.
+
+    Why a floor: sensors of one kind share an amplifier and a noise specification, so a quiet
+    channel (a pressure cell under a sleeper that hardly loads it, a cell reading nothing)
+    carries the same absolute noise as its neighbours, not a share of its own small signal.
+    Scaling by each channel's own std alone made the quietest channels the cleanest: in the
+    field matrix the transition bearer's pressure cell A6 (std ~2 kPa against 13-39 kPa
+    for A1-A5) had 1/13 of the others' absolute noise, and a cell reading round-off none.
+    """
+    std = {sid: float(np.std(x)) for sid, x in sampled.items()}
+    if chain.kind_floor <= 0.0:
+        return std
+    median = {k: float(np.median([s for sid, s in std.items() if types[sid] == k])) for k in set(types[s] for s in std)}
+    return {sid: max(s, chain.kind_floor * median[types[sid]]) for sid, s in std.items()}
+
+
 def apply_chain(sampled: dict, types: dict, dt: float, highpass: float, chain: Chain) -> dict:
     """The measured channels of the sampled true signals through the chain (module docstring).
 
@@ -250,12 +278,12 @@ def apply_chain(sampled: dict, types: dict, dt: float, highpass: float, chain: C
     dict
         Channel id -> measured signal (displacements reconstructed after the disturbance).
     """
-    out = {}
+    out, scales = {}, noise_scales(sampled, types, chain)
     for index, (sid, x) in enumerate(sampled.items()):
-        scale = float(np.std(x))
-        y = gain_and_reconstruct(sid, x + disturbance(chain, index, len(x), dt, scale), types, dt, highpass, chain)
+        y = gain_and_reconstruct(sid, x + disturbance(chain, index, len(x), dt, scales[sid]), types, dt, highpass,
+                                 chain)
         if sid == chain.gain_channel and types[sid] != "displacement":
-            y = y + chain.offset * scale
+            y = y + chain.offset * float(np.std(x))
         out[sid] = y
     return out
 
@@ -399,7 +427,8 @@ def draw_mismatch(rng: np.random.Generator, vehicle_kind: str) -> Mismatch:
 def draw_chain(rng: np.random.Generator, seed: int, channels, faulty: bool) -> Chain:
     """A field chain; ``faulty``: stronger drift and one channel off in gain (and offset)."""
     chain = Chain(seed, float(rng.uniform(*TRIGGER_RANGE)), float(rng.uniform(*WHITE)), float(rng.uniform(*COLOURED)),
-                  float(rng.uniform(*AR_COEFFICIENT)), float(rng.uniform(*(FAULTY_DRIFT if faulty else DRIFT))))
+                  float(rng.uniform(*AR_COEFFICIENT)), float(rng.uniform(*(FAULTY_DRIFT if faulty else DRIFT))),
+                  kind_floor=KIND_FLOOR)
     if not faulty:
         return chain
     gain = float(rng.uniform(*GAIN_ERROR[int(rng.integers(2))]))
@@ -485,5 +514,6 @@ def synthesize_case(scenario, case: FieldCase, out_file, crop: float = 0.01) -> 
 
 
 __all__ = ["FieldCase", "Mismatch", "Chain", "Family", "FAMILIES", "SLOW_FAMILIES", "EFFECT_DRAWS", "draw_case",
-           "draw_mismatch", "draw_chain", "draw_void_gaps", "wedge_residual", "ar1", "disturbance", "apply_chain",
-           "instrumented_sleepers", "synthesize_case", "gain_and_reconstruct", "GRID_CLEARANCE", "WEDGE_RESIDUAL_MIN", "DRIFT_HZ"]
+           "draw_mismatch", "draw_chain", "draw_void_gaps", "wedge_residual", "ar1", "disturbance", "noise_scales", "apply_chain",
+           "instrumented_sleepers", "synthesize_case", "gain_and_reconstruct", "GRID_CLEARANCE", "WEDGE_RESIDUAL_MIN", "DRIFT_HZ",
+           "KIND_FLOOR"]
