@@ -24,6 +24,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing
 import os
+import threading
 
 from orchestrator.inputs.errors import UserInputError
 
@@ -50,9 +51,15 @@ DASK_CONNECT_TIMEOUT = "30s"  # how long to try to reach a --scheduler address
 class DaskExecutor(cf.Executor):
     """A Dask ``distributed.Client`` seen as a :class:`concurrent.futures.Executor`.
 
-    ``submit`` goes through ``Client.get_executor()`` (whose futures are plain
-    ``concurrent.futures`` futures, so ``as_completed`` works unchanged);
-    ``shutdown`` also closes the client, which ``ClientExecutor.shutdown`` does not.
+    ``submit`` returns a plain ``concurrent.futures`` future (so ``as_completed`` works
+    unchanged), completed by awaiting the Dask future on the client's event loop
+    (:meth:`_settle`). Not through ``Client.get_executor()``: its bridge
+    (``distributed.cfexecutor._cascade_future``, distributed 2026.8) gathers the result and
+    then reads the Dask future's status again; when the worker holding that result dies in
+    between, the status is no longer "finished" and the result is unpacked as an error
+    triple — ``TypeError: cannot unpack non-iterable RunOutput object`` for a run that
+    succeeded (seen in ``tests/test_sweep.py::test_dask_reschedules_a_run_whose_worker_died``,
+    2 of 6 runs, about once in 10-25 runs under load). ``shutdown`` also closes the client.
     On connecting it registers :class:`orchestrator.sweeps.dask_plugin.WorkerThreads`
     with the cluster (each worker's BLAS threads).
 
@@ -82,8 +89,8 @@ class DaskExecutor(cf.Executor):
         except BaseException:
             self._client.close()
             raise
-        # pure=False: every submit is a task of its own (no key deduplication by Dask).
-        self._executor = self._client.get_executor(pure=False)
+        self._pending: dict = {}     # Dask future -> its concurrent.futures future, until settled
+        self._lock = threading.Lock()
 
     @property
     def slots(self) -> int:
@@ -91,11 +98,50 @@ class DaskExecutor(cf.Executor):
         return max(1, sum(self._client.nthreads().values()))
 
     def submit(self, fn, /, *args, **kwargs) -> cf.Future:
-        return self._executor.submit(fn, *args, **kwargs)
+        out = cf.Future()
+        # pure=False: every submit is a task of its own (no key deduplication by Dask).
+        task = self._client.submit(fn, *args, pure=False, **kwargs)
+        with self._lock:              # held here until settled: a released Dask future cancels its task
+            self._pending[task] = out
+        out.add_done_callback(lambda f: task.cancel() if f.cancelled() else None)
+        self._client.loop.add_callback(self._settle, task, out)
+        return out
+
+    async def _settle(self, task, out: cf.Future) -> None:
+        """Complete ``out`` with ``task``'s result or error, on the client's event loop.
+
+        ``await task`` waits, gathers, and raises the task's error; a result lost with its
+        worker is computed again and gathered then (Dask's own rescheduling). Each task waits
+        in its own coroutine, so one slow gather (a dead worker's address tried for Dask's
+        connect timeout, 30 s) holds up no other result."""
+        try:
+            if out.done():
+                return
+            try:
+                result = await task
+            except cf.CancelledError:
+                if out.cancel():
+                    out.set_running_or_notify_cancel()
+            except BaseException as exc:     # the run's own error, or Dask's (KilledWorker, ...)
+                if not out.done():
+                    out.set_exception(exc)
+            else:
+                if not out.done():
+                    out.set_result(result)
+        finally:
+            with self._lock:
+                self._pending.pop(task, None)
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        with self._lock:
+            tasks = list(self._pending)
         try:
-            self._executor.shutdown(wait=wait and not cancel_futures)
+            if cancel_futures and tasks:
+                self._client.cancel(tasks)
+            elif wait and tasks:
+                from distributed import wait as wait_for
+
+                wait_for(tasks)
         finally:
             self._client.close()
 
