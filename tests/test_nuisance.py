@@ -106,6 +106,47 @@ def test_speed_from_a_faster_passage_and_the_record_covered(sc, pool, tmp_path):
     assert cmp.objective < 0.5 * base.objective
 
 
+@pytest.mark.parametrize("falling", [False, True])
+def test_stage_1_keeps_the_run_of_least_objective_with_the_nominal_among_them(sc, monkeypatch, falling):
+    """Logic check on hand-built data (no simulation): the warp keeps asking for 2 % more speed.
+    Where every run at the speeds it asks for fits worse than the nominal one (J rising with the
+    speed, the case of issue 14's field-like pad_global+mismatch 7101 with the sensor kinds' noise
+    floor), stage 1 keeps the scenario's speed, its comparison and its time shift, and says so
+    (its interval: the warp's, widened to hold it);
+    where they fit better (J falling), the best of them (here the last). Exact comparisons: the
+    values are the hand-built ones passed through."""
+    from types import SimpleNamespace
+
+    from orchestrator.inverse import nuisance
+
+    v0 = float(sc.raw["vehicle"]["speed"])
+
+    def j_of(v):
+        return 0.30 + (-1.0 if falling else 1.0) * (v / v0 - 1.0)
+
+    class FakePool:
+        def map(self, raws):
+            return [SimpleNamespace(t=np.array([0.0, 1.0]), signals={}, speed=float(r["vehicle"]["speed"]))
+                    for r in raws]
+
+    monkeypatch.setattr(nuisance, "comparison",
+                        lambda target, run: SimpleNamespace(objective=j_of(run.speed), shift=1e-3 * run.speed))
+    monkeypatch.setattr(nuisance, "speed_from_data", lambda target, cmp: (1.02, 1.01, 1.03))
+    target = SimpleNamespace(measured=SimpleNamespace(t=np.array([0.0, 0.5])), shift=0.0,
+                             align_to=lambda t, signals: None)
+    base = SimpleNamespace(objective=j_of(v0), shift=0.007)
+    notes = []
+    raw_v, v, cmp, interval = nuisance.speed_corrected(FakePool(), target, sc.raw, base, notes)
+    if falling:
+        v_last = v0 * 1.02 ** nuisance.SPEED_RUNS
+        assert v == pytest.approx(v_last, rel=1e-12) and cmp.objective == pytest.approx(j_of(v_last), rel=1e-12)
+        assert raw_v["vehicle"]["speed"] == v and target.shift == cmp.shift
+    else:
+        assert (v, cmp, raw_v, target.shift) == (v0, base, sc.raw, 0.007)
+        assert interval == [v0, v0 * 1.03]      # the warp's, widened to hold the speed kept
+        assert "kept the scenario's" in notes[-1], notes
+
+
 def test_a_miscalibrated_channel_is_found_and_track_causes_are_not_turned_into_gains(sc, pool, tmp_path):
     """One channel at gain 0.9 is one channel off from its peers: found. A soft pad under one
     sleeper and a void move a neighbourhood of channels together: no gain at all."""

@@ -344,7 +344,8 @@ def speed_corrected(pool, target: Target, raw: dict, base_cmp: Comparison,
     # at a 0.99 warp, 0.332 at 1.01, the truth 0.973), the warp's iteration wandered to +1.4 % (truth -2.7 %)
     # and left the reference 10 % worse than the scenario's speed (J 0.369 against 0.334).
     if not secant:
-        tried.insert(0, (base_cmp.objective, raw, v0, base_cmp, [v0 * lo0, v0 * hi0], a0))
+        # its interval is the warp's, widened to hold the scenario's speed (the warp asked for another)
+        tried.insert(0, (base_cmp.objective, raw, v0, base_cmp, [v0 * min(lo0, 1.0), v0 * max(hi0, 1.0)], a0))
     _, out, v, cmp, interval, a = min(tried, key=lambda t: t[0])
     target.shift = cmp.shift
     if not secant and v == v0:
