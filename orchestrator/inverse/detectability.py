@@ -19,8 +19,9 @@ with the same model mismatch (vehicle, speed, damping, time step) — and return
   reconstruction of the accelerations' difference);
 * the **noise** ``n_c``: the white + coloured noise and drift the case's own chain put on
   the measured record (:func:`~orchestrator.inverse.fieldlike.disturbance`, scaled by the
-  std of the with-effect signal or its sensor kind's floor, :func:`~orchestrator.inverse.fieldlike.noise_scales`, times the channel's gain, reconstructed for displacement
-  channels), i.e. exactly what ``apply_chain`` adds to the noise-free record;
+  std of the with-effect signal or its sensor kind's floor,
+  :func:`~orchestrator.inverse.fieldlike.noise_scales`, times the channel's gain, reconstructed
+  for displacement channels), i.e. exactly what ``apply_chain`` adds to the noise-free record;
 * the **signature-to-noise ratio** ``rho_c = sum(d_c^2) / sum(n_c^2)``, and over the
   channels its plain mean and its maximum.
 
@@ -179,8 +180,8 @@ def chain_noise(sampled: dict, types: dict, dt: float, highpass: float, chain: C
     """The chain's noise realisation per channel: white + coloured + drift, as the measured record carries it.
 
     Written from :func:`~orchestrator.inverse.fieldlike.disturbance` (channel number =
-    position in ``sampled``, scale = :func:`~orchestrator.inverse.fieldlike.noise_scales`), times the faulty channel's gain,
-    reconstructed for displacement channels — the same as ``apply_chain(sampled)`` minus
+    position in ``sampled``, scale = :func:`~orchestrator.inverse.fieldlike.noise_scales`), times
+    the faulty channel's gain, reconstructed for displacement channels — the same as ``apply_chain(sampled)`` minus
     ``apply_chain`` of a chain without noise and drift (tests/test_detectability.py checks it).
     """
     scales = noise_scales(sampled, types, chain)

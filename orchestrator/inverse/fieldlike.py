@@ -253,8 +253,10 @@ def noise_scales(sampled: dict, types: dict, chain: Chain) -> dict:
     std = {sid: float(np.std(x)) for sid, x in sampled.items()}
     if chain.kind_floor <= 0.0:
         return std
-    median = {k: float(np.median([s for sid, s in std.items() if types[sid] == k])) for k in set(types[s] for s in std)}
-    return {sid: max(s, chain.kind_floor * median[types[sid]]) for sid, s in std.items()}
+    by_kind: dict = {}
+    for sid, s in std.items():
+        by_kind.setdefault(types[sid], []).append(s)
+    return {sid: max(s, chain.kind_floor * float(np.median(by_kind[types[sid]]))) for sid, s in std.items()}
 
 
 def apply_chain(sampled: dict, types: dict, dt: float, highpass: float, chain: Chain) -> dict:
@@ -514,6 +516,6 @@ def synthesize_case(scenario, case: FieldCase, out_file, crop: float = 0.01) -> 
 
 
 __all__ = ["FieldCase", "Mismatch", "Chain", "Family", "FAMILIES", "SLOW_FAMILIES", "EFFECT_DRAWS", "draw_case",
-           "draw_mismatch", "draw_chain", "draw_void_gaps", "wedge_residual", "ar1", "disturbance", "noise_scales", "apply_chain",
-           "instrumented_sleepers", "synthesize_case", "gain_and_reconstruct", "GRID_CLEARANCE", "WEDGE_RESIDUAL_MIN", "DRIFT_HZ",
-           "KIND_FLOOR"]
+           "draw_mismatch", "draw_chain", "draw_void_gaps", "wedge_residual", "ar1", "disturbance", "noise_scales",
+           "apply_chain", "instrumented_sleepers", "synthesize_case", "gain_and_reconstruct", "GRID_CLEARANCE",
+           "WEDGE_RESIDUAL_MIN", "DRIFT_HZ", "KIND_FLOOR"]

@@ -315,10 +315,12 @@ def speed_corrected(pool, target: Target, raw: dict, base_cmp: Comparison,
     v0 = float(raw["vehicle"]["speed"])
     dur0 = float(raw["simulation"]["duration"])
     a, lo, hi = speed_from_data(target, base_cmp)
-    a0, lo0, hi0 = a, lo, hi
     if abs(a - 1.0) <= SPEED_RTOL:
         notes.append(f"speed: the data agree with the scenario's {v0:.3f} m/s (warp ratio {a:.4f})")
         return raw, v0, base_cmp, [v0 * lo, v0 * hi]
+    # Stage 1 counts the nominal run among the candidates (below); its interval is the warp's, widened to hold
+    # the scenario's speed (the warp asked for another).
+    nominal = [] if secant else [(base_cmp.objective, raw, v0, base_cmp, [v0 * min(lo, 1.0), v0 * max(hi, 1.0)], a)]
     v, v_prev, a_prev = v0, None, None
     tried = []
     for _ in range(SPEED_RUNS):
@@ -338,23 +340,19 @@ def speed_corrected(pool, target: Target, raw: dict, base_cmp: Comparison,
         tried.append((cmp.objective, out, v, cmp, [v * lo, v * hi], a))
         if abs(a - 1.0) <= SPEED_RTOL:
             break
-    # the run of least J. With secant: a secant step can overshoot where the warp's ratio is not smooth in v.
+    # The run of least J. With secant: a secant step can overshoot where the warp's ratio is not smooth in v.
     # Without (stage 1), the nominal run is among them: where J is flat or has two minima in the warp
     # (measured on issue 14's field-like pad_global+mismatch 7101 with the sensor kinds' noise floor: J 0.327
     # at a 0.99 warp, 0.332 at 1.01, the truth 0.973), the warp's iteration wandered to +1.4 % (truth -2.7 %)
     # and left the reference 10 % worse than the scenario's speed (J 0.369 against 0.334).
-    if not secant:
-        # its interval is the warp's, widened to hold the scenario's speed (the warp asked for another)
-        tried.insert(0, (base_cmp.objective, raw, v0, base_cmp, [v0 * min(lo0, 1.0), v0 * max(hi0, 1.0)], a0))
-    _, out, v, cmp, interval, a = min(tried, key=lambda t: t[0])
+    _, out, v, cmp, interval, a = min(nominal + tried, key=lambda t: t[0])
     target.shift = cmp.shift
-    if not secant and v == v0:
+    if cmp is base_cmp:
         notes.append(f"speed: kept the scenario's {v0:.3f} m/s: the runs at the speeds the warp asked for "
-                     f"({', '.join(f'{t[2]:.3f}' for t in tried[1:])} m/s) fit worse (J "
-                     f"{', '.join(f'{t[0]:.4g}' for t in tried[1:])} against {base_cmp.objective:.4g})")
-        return out, v, cmp, interval
-    notes.append(f"speed: {v:.3f} m/s from the data (scenario {v0:.3f}; {'its' if secant else 'last'} warp ratio "
-                 f"{a:.4f})")
+                     f"({', '.join(f'{t[2]:.3f}' for t in tried)} m/s) fit worse (J "
+                     f"{', '.join(f'{t[0]:.4g}' for t in tried)} against {base_cmp.objective:.4g})")
+    else:
+        notes.append(f"speed: {v:.3f} m/s from the data (scenario {v0:.3f}; its warp ratio {a:.4f})")
     return out, v, cmp, interval
 
 

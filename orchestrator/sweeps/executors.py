@@ -58,8 +58,8 @@ class DaskExecutor(cf.Executor):
     then reads the Dask future's status again; when the worker holding that result dies in
     between, the status is no longer "finished" and the result is unpacked as an error
     triple — ``TypeError: cannot unpack non-iterable RunOutput object`` for a run that
-    succeeded (seen in ``tests/test_sweep.py::test_dask_reschedules_a_run_whose_worker_died``,
-    2 of 6 runs, about once in 10-25 runs under load). ``shutdown`` also closes the client.
+    succeeded (seen in ``tests/test_sweep.py::test_dask_reschedules_a_run_whose_worker_died``:
+    2 of its 6 runs, in 1 of 11 runs of the test under load, 2026-11-28). ``shutdown`` also closes the client.
     On connecting it registers :class:`orchestrator.sweeps.dask_plugin.WorkerThreads`
     with the cluster (each worker's BLAS threads).
 
