@@ -605,11 +605,12 @@ class _Runs:
 
     With ``causes`` (step 5c's joint refit, :func:`refit_jointly`): points ``[box..., causes..., shift]``,
     each cause ``(kind, sleeper, n)`` taking the next ``n`` entries (its unit cube) and applied to ``raw``
-    before the box's values."""
+    before the box's values. ``held``: names of the box whose values are never applied (``raw``'s stand)."""
 
-    def __init__(self, pool, target: Target, raw: dict, box: _Box, causes: Sequence = ()):
+    def __init__(self, pool, target: Target, raw: dict, box: _Box, causes: Sequence = (), held: Sequence = ()):
         self.pool, self.target, self.raw, self.box = _Counted(pool), target, raw, box
         self.causes = list(causes)
+        self.applied = [i for i, n in enumerate(box.names) if n not in held]
         self.s0 = float(target.shift)
         self.sims: dict[bytes, object] = {}
         self.cmps: dict[bytes, Comparison] = {}
@@ -638,8 +639,9 @@ class _Runs:
         return raw
 
     def scenario(self, p: np.ndarray) -> dict:
-        """The raw scenario of a point without its shift: the causes' values, then the box's."""
-        return self.box.apply(self.with_causes(p), self.box.values(p[:len(self.box.names)]))
+        """The raw scenario of a point without its shift: the causes' values, then the box's (not the held ones)."""
+        values = self.box.values(p[:len(self.box.names)])
+        return self.box.apply(self.with_causes(p), values[self.applied], [self.box.names[i] for i in self.applied])
 
     def comparisons(self, us: list) -> list:
         us = [np.clip(np.asarray(u, float), 0.0, 1.0) for u in us]
@@ -849,9 +851,10 @@ def refit_with_causes(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     fitted values, from stage 3's values — one pass of backfitting, as step 5b of the diagnosis
     does between two causes; the causes' parameters are not fitted again:
 
-    - the same box, parameters and time shift as stage 3, but the speed: it stays stage 3's here
-      (its box is +-0.5 % about stage 1's; :func:`speed_again` finds it again from the data after
-      this refit);
+    - the same box, parameters and time shift as stage 3, but the speed: it stays ``raw_ext``'s here
+      (stage 3's, or the one the diagnosis found again before its second round, step 4b; its box is
+      +-0.5 % about stage 1's; :func:`speed_again` finds it again from the data after this refit); the
+      time shift's box is centred on ``target``'s;
     - a Jacobian at the extended model (a run per parameter, 6), then
       :data:`REFIT_STEPS` Gauss-Newton steps, one run each, the Jacobian updated by Broyden's
       rule after each; a step that does not lower the residual ends them. Measured on issue 14's
@@ -913,7 +916,11 @@ def _stage4_steps(pool, target: Target, veh: _VehicleFit, raw: dict, start: Comp
     counted in the intervals), the values not accepted at nominal (one more run when that moves the point)."""
     box, nb = veh.box, len(veh.box.names)
     own = replace(target)   # its shift moves with the refit's
-    rn = _Runs(pool, own, box.apply(raw, box.nominal), box, causes)
+    # the speed is not refitted here: ``raw``'s stands (stage 3's, or the one the diagnosis found again before its
+    # second round, step 4b), never the box's point of stage 3
+    others = [n for n in box.names if n != "speed"]
+    rn = _Runs(pool, own, box.apply(raw, box.nominal[[box.names.index(n) for n in others]], others), box, causes,
+               held=("speed",))
     u = np.concatenate([veh.u[:-1], *cause_units, [0.5]])      # veh.u's shift is 0.5: ``target``'s
     free = np.concatenate([[n != "speed" for n in box.names], np.ones(u.size - nb, bool)])
     r = own.weighted_residuals(start)
@@ -960,7 +967,7 @@ def refit_jointly(pool, target: Target, nz: NuisanceFit, causes: list,
     values refitted). Same steps as :func:`refit_with_causes` (a forward-difference Jacobian, one run per
     free entry, then :data:`REFIT_STEPS` Broyden-updated Gauss-Newton steps), the same acceptance of
     the box's values and their intervals (from the joint Jacobian: the causes' parameters' correlation
-    with them counted); the speed stays stage 3's, as there.
+    with them counted); the speed stays ``nz.raw``'s, as there.
 
     ``causes``: ``[(kind, sleeper, values)]`` of the named causes at their current values; ``start``:
     the extended model's comparison. Output: ``None`` when there is nothing to fit, else the updated
@@ -1002,8 +1009,8 @@ def _refitted(nz: NuisanceFit, st: _Stage4, refit: dict) -> NuisanceFit:
     return out
 
 
-def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
-                start: Comparison) -> tuple[NuisanceFit, dict, Comparison] | None:
+def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict, start: Comparison,
+                when: str = "with the named causes") -> tuple[NuisanceFit, dict, Comparison] | None:
     """Stage 5, after the causes: stage 1's speed from the data again, on the extended model.
 
     Stage 1 warps the *nominal* run, and a track effect that changes the shape of the signals
@@ -1025,7 +1032,7 @@ def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     stands; a note says why when runs were made), else the fit with ``values["speed"]``,
     ``intervals["speed"]`` (stage 1's profile interval on the run kept), ``shift`` and ``raw``
     (the extended scenario at the new speed) updated and ``speed_again`` saying what changed,
-    the extended raw scenario and its comparison.
+    the extended raw scenario and its comparison. ``when``: the note's words for the model it ran on.
     """
     own = replace(target, shift=start.shift)
     a, _, _ = speed_from_data(own, start)
@@ -1039,10 +1046,11 @@ def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict,
     nz.speed_again = {"value_before": v0, "interval_before": [float(x) for x in nz.intervals["speed"]],
                       "shift_before": float(start.shift), "objective_before": float(start.objective),
                       "objective_after": float(cmp.objective), "chi2_before": float(start.chi2),
-                      "chi2_after": float(cmp.chi2), "runs": counted.runs, "notes": notes}
+                      "chi2_after": float(cmp.chi2), "runs": counted.runs, "notes": notes, "when": when,
+                      **({"earlier": nz.speed_again} if nz.speed_again is not None else {})}
     nz.values["speed"], nz.intervals["speed"] = float(v), [float(x) for x in interval]
     nz.shift, nz.raw = float(cmp.shift), raw_v
-    nz.notes.append(f"speed again with the named causes: {v0:.3f} -> {v:.3f} m/s (J {start.objective:.4g} -> "
+    nz.notes.append(f"speed again {when}: {v0:.3f} -> {v:.3f} m/s (J {start.objective:.4g} -> "
                     f"{cmp.objective:.4g})")
     return nz, raw_v, cmp
 
