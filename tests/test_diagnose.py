@@ -433,14 +433,15 @@ def test_effective_size_of_white_noise_is_n():
 
 
 def _fake_target(channels, sigma):
-    """A Target-like object for :func:`orchestrator.inverse.significance.assess`: two groups of two channels."""
+    """A :class:`Target` of hand-built channels (a stand-in layout and record): two groups of two channels."""
     from types import SimpleNamespace
+
+    from orchestrator.inverse.objective import Target
 
     groups = {k: ("P" if i < 2 else "Q") for i, k in enumerate(channels)}
     layout = SimpleNamespace(groups=groups, weights={"P": 1.0, "Q": 1.0}, types={k: "pressure" for k in channels})
     measured = SimpleNamespace(channels=channels, t=np.arange(next(iter(channels.values())).size) * 2e-4, dt=2e-4)
-    return SimpleNamespace(layout=layout, measured=measured, sigma=sigma, shift=0.0,
-                           scale={k: float(np.std(v)) for k, v in channels.items()})
+    return Target(measured, layout, sigma, shift=0.0, scale={k: float(np.std(v)) for k, v in channels.items()})
 
 
 def _cmp_of(target, residuals):
@@ -636,6 +637,50 @@ def test_step_5c_keeps_the_best_point_of_all_paths(monkeypatch):
                                             {"model": "given"}, given, named)
     assert cmp is joint and fit.refit == {"reason": "joint"} and [list(v) for v in values] == [[0.7]]
     assert fit.runs == 40 + (9 + 2) + (8 + 2) + 2 and fit.notes[-1].endswith("kept the joint refit"), fit.notes
+
+
+def test_step_4b_keeps_the_speed_found_again_only_where_it_fits_better(monkeypatch):
+    """Step 4b's speed (diagnose._speed_between), a logic check on hand-built residuals: the speed found again
+    (nuisance.speed_again, replaced by a fake returning a given point at 34 m/s) is kept only when it fits better
+    by step 5c's rule (diagnose._lower). Kept: round 2's target takes the point's shift, the nuisance estimates
+    (a copy) the new speed, their ``raw`` the nuisance model *without* the cause at it (the reference step 5b
+    refits on), and the model returned is the point's. Not kept: everything given stands, the runs made are
+    counted and a note says why."""
+    from orchestrator.inverse import nuisance
+    from orchestrator.inverse.diagnose import _speed_between
+    from orchestrator.inverse.nuisance import NuisanceFit
+
+    channels, sd, target, bump, noise = _bump_misfit(21)
+
+    def point(p, shift):
+        cmp = _cmp_of(target, {k: p * bump * sd[k] + noise[k] for k in channels})
+        cmp.shift = shift
+        return cmp
+
+    given = point(0.10, 0.0)
+    sc = load_scenario(SCENARIO)
+    ext = {**sc.raw, "marker": "with the cause"}
+
+    def run(chosen):
+        def fake_speed(pool, tg, nz, raw, cmp, when):
+            assert raw is ext and cmp is given and "ballast_void@21" in when
+            nz.runs += 2
+            nz.values["speed"] = 34.0
+            return nz, {**raw, "marker": "with the cause at 34"}, chosen
+
+        monkeypatch.setattr(nuisance, "speed_again", fake_speed)
+        nz = NuisanceFit(sc.raw, {"speed": 33.333}, {}, {}, {}, {}, 0.0, given, 40)
+        return nz, _speed_between(None, target, nz, ext, given, "ballast_void@21, before round 2")
+
+    better = point(0.05, 1e-4)
+    nz, (tg, fit, raw, cmp) = run(better)
+    assert cmp is better and raw["marker"] == "with the cause at 34" and tg.shift == 1e-4 and target.shift == 0.0
+    assert fit is not nz and fit.values["speed"] == 34.0 and nz.values["speed"] == 33.333 and fit.runs == 42
+    assert fit.raw["vehicle"]["speed"] == 34.0 and "marker" not in fit.raw
+    worse = point(0.12, 1e-4)
+    nz, (tg, fit, raw, cmp) = run(worse)
+    assert cmp is given and raw is ext and tg is target and fit is nz and nz.values["speed"] == 33.333
+    assert nz.runs == 42 and nz.notes[-1].endswith("not kept"), nz.notes
 
 
 def test_interval_of_a_linear_fit_is_the_textbook_one():

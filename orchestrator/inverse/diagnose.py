@@ -363,8 +363,7 @@ def _nuisance_again(pool: Pool, inp: _Inputs, nz: NuisanceFit, ext_raw: dict,
     """
     from orchestrator.inverse.nuisance import refit_jointly, refit_with_causes, speed_again
 
-    # the extended model's alignment (step 4b may have moved it)
-    own = inp.target if final.shift == inp.target.shift else replace(inp.target, shift=final.shift)
+    own = replace(inp.target, shift=final.shift)   # the extended model's alignment (step 4b may have moved it)
 
     def refit_path() -> tuple[list, int]:
         mine = copy.deepcopy(nz)
