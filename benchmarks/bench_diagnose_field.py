@@ -5,8 +5,11 @@ a case is drawn (:func:`~orchestrator.inverse.fieldlike.draw_case`: effects also
 the instrumented sleepers, voids that are not wedges, off-grid magnitudes, a truth
 model with other vehicle parameters / speed / damping / step, a field sensor chain),
 its passage is written (:func:`~orchestrator.inverse.fieldlike.synthesize_case`) and
-diagnosed on the nominal scenario ``scenarios/measurement/crossing_quarter_120.yaml``
-(:func:`orchestrator.inverse.diagnose.diagnose`, told nothing about the case). Each
+diagnosed on the nominal scenario ``scenarios/measurement/crossing_quarter_120_fine.yaml``
+(:func:`orchestrator.inverse.diagnose.diagnose`, told nothing about the case; until 2026-11-29 the
+coarse ``crossing_quarter_120.yaml``, whose own time-step error is as large as the noise: the
+fine file's header). The truth's step is the scenario's, divided by the case's
+``step_divisor`` with model-form mismatch. Each
 answer is scored here, out of reach of the code under test:
 
 * a null case (no effect) is right on ``none`` or ``unexplained`` — never a track cause
@@ -75,7 +78,8 @@ from orchestrator.inverse.fieldlike import (FAMILIES, SLOW_FAMILIES, FieldCase, 
                                             synthesize_case)
 from orchestrator.inverse.jsonable import numpy_default
 
-SCENARIO = bundled_scenario("measurement/crossing_quarter_120.yaml")
+# the field-data scenario: the test suite's crossing_quarter_120.yaml at half its step (its header says why)
+SCENARIO = bundled_scenario("measurement/crossing_quarter_120_fine.yaml")
 TRACK_CAUSES = ("ballast_void", "ballast_stiffness", "rail_pad_stiffness", "impact_angle")
 MAX_AMBIGUITY = 2       # sleepers in an ambiguity set that still counts as located (bench_diagnose.py)
 MAX_AMBIGUITY_OFF = 3   # ... for an effect beyond the sensors (the edge sleeper and its neighbours)

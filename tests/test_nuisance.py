@@ -361,12 +361,14 @@ def test_speed_step_bias_extrapolates_to_a_finer_model(sc, pool, tmp_path):
     """The speed interval's time-step term (nuisance.speed_step_bias, widen_speed_for_step), against an
     independent reference: a passage made by the same model at a quarter of its step (0.2 % noise, so
     the warp sees the step and not the noise), at the scenario's own speed. The speed the warp finds on
-    it from the run at the scenario's step departs from 1 more than the half-step run does (the finer
-    the truth, the further) and less than the first-order extrapolation to the converged model, the
-    bias (measured: 0.152 %, 0.208 %, 0.303 %); the step makes the fitted speed low (bias < 0); the
-    interval widened on that side holds the true speed, and a bias of the other sign widens the other
-    side. No tolerance: the ordering is the claim (its margins, 0.06 % and 0.10 %, are 6-10x the warp's
-    resolution here, ~0.01 % of its 0.25 % grid through the parabola)."""
+    it from the run at the scenario's step departs from 1 less than the first-order extrapolation to the
+    converged model, the bias, does, and so does the half-step run's; the step makes the fitted speed low
+    (bias < 0); the interval widened on that side holds the true speed, and a bias of the other sign
+    widens the other side. Measured: the quarter-step passage 0.098 %, the half-step run 0.114 %, the
+    bias 0.227 % (before 2026-11-29, without the comparison's anti-alias filter: 0.208 %, 0.152 %,
+    0.303 %, and the finer truth departed further; band-limited at 1 kHz the two lie 0.016 % apart, near
+    the warp's resolution, ~0.01 % of its 0.25 % grid through the parabola, so their order is no longer
+    asserted). No tolerance: the ordering against the bias is the claim (margins 0.11 % and 0.13 %)."""
     from dataclasses import replace
 
     from orchestrator.inverse.nuisance import NuisanceFit, speed_from_data, speed_step_bias, widen_speed_for_step
@@ -388,7 +390,7 @@ def test_speed_step_bias_extrapolates_to_a_finer_model(sc, pool, tmp_path):
     print(f"\nwarp on the quarter-step passage {a_meas:.5f} [{lo:.4f}, {hi:.4f}]; half step {a_half:.5f}, "
           f"bias {bias:+.5f}")
     assert bias < 0
-    assert abs(a_half - 1.0) < abs(a_meas - 1.0) < abs(bias)
+    assert max(abs(a_half - 1.0), abs(a_meas - 1.0)) < abs(bias)
     v = float(sc.raw["vehicle"]["speed"])
     nz = NuisanceFit({}, {"speed": a_meas * v}, {"speed": v}, {"speed": [lo * v, hi * v]}, {"speed": True}, {}, 0.0,
                      coarse, 0)
@@ -487,12 +489,13 @@ def test_a_named_pad_fitted_again_after_the_nuisance_refit(sc, pool, tmp_path):
 
     # step 5c's joint path (nuisance.refit_jointly): from the same start, the nuisance values and the scale
     # fitted together reach a lower J than the alternation above (step 5c's refit, then step 5d), the scale
-    # and the wheelset mass within the stage-3 tolerance of their truths (MASS_RTOL: the mass is the value
-    # stage 3 took the pads' effect into; the scale is held to the same 1 %, ten times its measured error and
-    # a fifth of the distance from the truth (2.0) to the scale fitted on stage 3's model, 1.89 — so it fails
-    # when the joint steps leave the scale where stage 3 put it), the wheelset's interval holding
-    # its truth, and the extended model carries the joint scale. Measured: scale 1.998, mass 1349 kg, J
-    # 0.0196 in 10 runs, against 1.980 and J 0.0202 by steps 5c and 5d (~20 runs).
+    # the wheelset mass within the stage-3 tolerance of its truth (MASS_RTOL: the mass is the value stage 3
+    # took the pads' effect into), the scale within a third of the distance from the truth (2.0) to the scale
+    # fitted on stage 3's model (so it fails when the joint steps leave the scale where stage 3 put it), the
+    # wheelset's interval holding its truth, and the extended model carries the joint scale. Measured: scale
+    # 1.9745 (stage 3's 1.891), mass 1352 kg, J 0.0237 in 11 runs, against 1.972 and J 0.0239 by steps 5c
+    # and 5d (~20 runs). Before 2026-11-29 (no anti-alias filter in the comparison): 1.998 from 1.89, and the
+    # scale was held to 1 %; band-limited at 1 kHz the pads' signature above it is not compared.
     import copy
 
     from orchestrator.inverse.nuisance import refit_jointly
@@ -501,7 +504,7 @@ def test_a_named_pad_fitted_again_after_the_nuisance_refit(sc, pool, tmp_path):
                                              fitted.cmp)
     print(f"joint: scale {scale_j[0]:.4f}, {fit_j.values} (J {cmp_j.objective:.4f}, {fit_j.refit['runs']} runs)")
     assert cmp_j.objective < cmp6.objective
-    assert scale_j[0] == pytest.approx(true_scale, rel=MASS_RTOL)
+    assert abs(scale_j[0] - true_scale) < abs(fitted.values[0] - true_scale) / 3
     assert fit_j.values["wheelset_mass"] == pytest.approx(1350.0, rel=MASS_RTOL)
     lo, hi = fit_j.intervals["wheelset_mass"]
     assert lo <= 1350.0 <= hi, (lo, hi)

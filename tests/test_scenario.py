@@ -695,3 +695,19 @@ def test_cli_user_error_from_job(monkeypatch, default_scenario_path, capsys):
     monkeypatch.setattr(jobs, "frf_job", fail)
     assert main(["frf", str(default_scenario_path), "--at", "nose:1"]) == 2
     assert capsys.readouterr().err == "turnout: error: no rail body named 'nose' (have: crossing)\n"
+
+
+def test_the_fine_measurement_scenario_is_the_coarse_one_at_half_the_step():
+    """Consistency check (two files of ours): scenarios/measurement/crossing_quarter_120_fine.yaml, the
+    field-data scenario of issue 14's matrix, differs from the test suite's crossing_quarter_120.yaml only
+    in its name and its time step, half of it (the output step, the sensors' 5 kHz, stays), so the
+    matrix and the tests diagnose the same model but for the step."""
+    here = Path(__file__).resolve().parents[1] / "scenarios" / "measurement"
+    coarse, fine = (load_scenario(here / f).raw for f in ("crossing_quarter_120.yaml",
+                                                         "crossing_quarter_120_fine.yaml"))
+    assert fine["simulation"]["step"] == 0.5 * coarse["simulation"]["step"]
+    assert fine["simulation"]["output_step"] == coarse["simulation"]["output_step"]
+    for raw in (coarse, fine):
+        raw.pop("name")
+        raw["simulation"].pop("step")
+    assert fine == coarse

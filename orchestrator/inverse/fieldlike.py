@@ -13,6 +13,9 @@ Here a *case* (:class:`FieldCase`) hides three things, drawn per seed and per fa
 * ``mismatch`` (:class:`Mismatch`): the truth is another model: vehicle parameters
   (:data:`VEHICLE_MISMATCH`) each within +-20 %, the speed within +-4 %, the track's
   ballast and pad damping x0.6-1.6, a time step 2 or 4 times finer (output step kept);
+* the acquisition: the truth's output band-limited by an anti-alias filter at 0.4 x the
+  sampling rate (:func:`track.sensors.anti_alias`, since 2026-11-29; the diagnosis filters its
+  model the same way), then sampled;
 * ``chain`` (:class:`Chain`): white noise, coloured noise (AR(1)), a slow drift (a
   sine below 1 Hz, under the reconstruction's 5 Hz high-pass corner), and in the
   ``faulty`` chain one channel with a gain error and an offset. For displacement

@@ -5,7 +5,9 @@ Objective (DESIGN.md §4.3, §5) — a weighted sum over sensor groups of the no
     nRMSE_i = sqrt( mean_t (s_i(t) - m_i(t))^2 ) / std_t(m_i)        (channel i, valid samples)
     J       = sum_g w_g * mean_{i in g} nRMSE_i  /  sum_g w_g
 
-``s`` is the simulation put on the measured time base (after the time alignment),
+``s`` is the simulation put on the measured time base (after the time alignment), band-limited
+first as the acquisition that sampled ``m`` is (:func:`track.sensors.anti_alias`, below ~0.4 of
+its sampling rate: content above it depends on the model's time step and would fold into the band),
 ``m`` the measurement; ``w_g`` the layout's group weights (default 1 each, so a group
 with six channels counts as much as one with two). Normalising by the channel's
 standard deviation makes pressures [Pa], strains [-] and displacements [m] comparable;
@@ -26,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from track.sensors import displacement_from_acceleration
+from track.sensors import anti_alias, displacement_from_acceleration
 
 MAD_TO_SIGMA = 1.4826   # sigma / MAD of a normal distribution
 NOISE_FLOOR = 1e-12     # relative to the channel's std: keeps chi-square finite for noise-free data
@@ -140,7 +142,8 @@ class _ChannelFit(dict):
 
 def on_measured_base(measured, t_sim: np.ndarray, sim: dict, shift: float, types: dict | None = None,
                      highpass: float | None = None) -> dict:
-    """The simulation on the measured time base, ``s(t) = sim(t - shift)`` (cubic; NaN outside).
+    """The simulation on the measured time base, ``s(t) = sim(t - shift)`` (cubic; NaN outside), band-limited
+    first by the anti-alias filter of an acquisition at the measured rate (:func:`track.sensors.anti_alias`).
 
     Displacement channels (``types[id] == "displacement"``, given as their
     accelerometer's signal) are reconstructed here, on the measured window, by the
@@ -154,7 +157,8 @@ def on_measured_base(measured, t_sim: np.ndarray, sim: dict, shift: float, types
     ids = list(sim)
     # one spline of all channels (columns): the same banded solve and evaluation per column as a
     # spline per channel, without a spline object per channel (a third of the function's time)
-    on = CubicSpline(t_sim, np.column_stack([sim[k] for k in ids]))(t_new[inside]) if ids else None
+    on = CubicSpline(t_sim, anti_alias(t_sim, np.column_stack([sim[k] for k in ids]), measured.rate))(
+        t_new[inside]) if ids else None
     for j, k in enumerate(ids):
         s = np.full(t_new.shape, np.nan)
         s[inside] = on[:, j]
@@ -372,7 +376,9 @@ class Target:
 
         acc = [k for k, t in self.layout.types.items() if t == "acceleration" and k in self.measured.channels]
         use = acc or [k for k in self.measured.channels if k in sim]
-        self.shift = align(self.measured, t_sim, {k: sim[k] for k in use}, weights={k: 1.0 for k in use})
+        band = anti_alias(t_sim, np.column_stack([sim[k] for k in use]), self.measured.rate) if use else None
+        self.shift = align(self.measured, t_sim, {k: band[:, j] for j, k in enumerate(use)},
+                           weights={k: 1.0 for k in use})
         return self.shift
 
     def compare(self, t_sim: np.ndarray, sim: dict) -> Comparison:

@@ -58,6 +58,8 @@ SENSOR_TYPES = ("pressure", "displacement", "acceleration", "strain")
 GAUGE_LENGTH = 0.1   # m: default strain-gauge base (a 100 mm gauge; also the beam element length)
 RECONSTRUCTION_HIGHPASS = 5.0   # Hz: default corner of the displacement reconstruction filter
 RECONSTRUCTION_ORDER = 2        # Butterworth order (applied forward and backward: zero phase)
+ANTI_ALIAS_SHARE = 0.4          # anti-alias low-pass corner / sampling rate (anti_alias)
+ANTI_ALIAS_ORDER = 4            # Butterworth order (applied forward and backward: zero phase, |H|^2)
 # Sensors on the solid crossing rail: z is a height above the neutral axis of the untrimmed rail
 # section, a place on the rail as a field layout gives it (track.solid.crossing.SolidCrossing.gauge_points).
 # Ahead of the nose tip and along it the trimmed head lowers the solid's own neutral axis (52 mm instead
@@ -336,5 +338,52 @@ def displacement_from_acceleration(acc: np.ndarray, dt: float, f_c: float = RECO
     return np.fft.irfft(X, n=n)
 
 
-__all__ = ["Sensor", "SENSOR_TYPES", "CompiledSensors", "compile_sensors", "sensor_signals",
+def anti_alias(t: np.ndarray, x: np.ndarray, rate: float, share: float = ANTI_ALIAS_SHARE,
+               order: int = ANTI_ALIAS_ORDER) -> np.ndarray:
+    """Signals band-limited as an acquisition sampling at ``rate`` does before it samples.
+
+    A data acquisition low-passes every channel below its Nyquist frequency before the converter
+    samples it; content above it would fold into the band. Here: a Butterworth low-pass of corner
+    ``share x rate`` (0.4: a sigma-delta converter's pass band ends at ~0.45 of its rate, an analogue
+    anti-alias filter's corner sits lower), applied forward and backward (zero phase: a linear-phase
+    digital filter whose delay the converter removes; the magnitude is |H|^2, -6 dB at the corner).
+    Applied on the simulation's own output grid ``t`` (uniform), before any interpolation to the
+    acquisition's times.
+
+    Why (benchmarks/RESULTS.md, session 32): the model's rail accelerations and reconstructed sleeper
+    displacements above ~1 kHz depend on its time step and hardly converge as it is halved (the
+    measurement scenario at 2e-4 s against itself at 1e-4 s, 1e-4 against 5e-5, 5e-5 against 2.5e-5:
+    objective J 0.076, 0.072, 0.053 on field-like null_clean 7000, whose noise is J 0.067); through this
+    filter at 0.4 x 2.5 kHz they converge at about first order (0.034, 0.021, 0.011). A comparison of unfiltered model output with a record sampled at 2.5 kHz counts that
+    step-dependent, folded content as misfit.
+
+    Parameters
+    ----------
+    t : ndarray, shape (nt,)
+        Uniform times [s] of the signals.
+    x : ndarray, shape (nt,) or (nt, n)
+        Signals (columns).
+    rate : float
+        The acquisition's sampling rate [Hz].
+
+    Returns
+    -------
+    ndarray, like ``x``. Unchanged when the corner lies at or above the signals' own Nyquist frequency
+    or the record is too short to filter.
+    """
+    from scipy.signal import butter, sosfiltfilt
+
+    x = np.asarray(x, float)
+    fs = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    corner = share * float(rate)
+    if not 0.0 < corner < 0.5 * fs:
+        return x
+    sos = butter(order, corner, fs=fs, output="sos")
+    pad = 3 * (2 * len(sos) + 1)
+    if x.shape[0] <= pad:
+        return x
+    return sosfiltfilt(sos, x, axis=0)
+
+
+__all__ = ["Sensor", "anti_alias", "ANTI_ALIAS_SHARE", "SENSOR_TYPES", "CompiledSensors", "compile_sensors", "sensor_signals",
            "displacement_row", "solid_strain_row", "SOLID_DATUM", "pressure_weights", "displacement_from_acceleration"]
