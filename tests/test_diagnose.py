@@ -877,3 +877,19 @@ def test_a_channel_reading_round_off_is_normalised_as_a_constant_one():
         assert sigma[dead] == pytest.approx(ratio * median, rel=1e-9), dead
     assert scale["A5"] == pytest.approx(np.std(ch["A5"]), rel=1e-12)       # its own std, unchanged
     assert sigma["A5"] == pytest.approx(noise_sigma(ch["A5"]), rel=1e-12)
+
+
+def test_the_step_error_note_extrapolates_the_half_step_difference_to_the_converged_model():
+    """The `unexplained` answer's note on the model's own time-step error (diagnose._step_words) weighs the error
+    against the converged model, not the half-step run's difference: Richardson at first order (written here, not
+    imported) doubles it, e(h) = 2 (y_h - y_h/2). A difference of 0.6 x the noise objective is then 1.2 x it:
+    the note is given, with both figures; 0.4 x (0.8 x against the converged model) gives none, nor does a
+    missing step error."""
+    from orchestrator.inverse.diagnose import _step_words
+
+    j_noise = 0.067
+    err = {"step": 2e-4, "groups": {"A": 0.01, "E": 0.16}}
+    loud = _step_words({**err, "objective": 0.6 * j_noise}, j_noise)
+    assert "0.0402" in loud and f"{2 * 0.6 * j_noise:.3g}" in loud and "group E" in loud
+    assert _step_words({**err, "objective": 0.4 * j_noise}, j_noise) == ""
+    assert _step_words(None, j_noise) == ""

@@ -175,6 +175,9 @@ FAR_REACH = 3        # ... and +- this many when round 1 names nothing above the
 MAX_CAUSES = 2       # causes named at most (forward selection)
 SECOND_ROUND = 4     # candidates of round 1 (next best) screened again on top of the first named cause, ...
 SECOND_CONFIRM = 2   # ... of which this many are re-run and fitted
+SIGNAL_STEP_ORDER = 1   # order of the model's time-step error in the compared signals (_step_words): band-limited,
+                        # J between successive halvings 0.034, 0.021, 0.011 (ratios 1.6, 1.9: about first order;
+                        # benchmarks/RESULTS.md, session 32)
 
 
 def _parse_validate(texts) -> list[tuple[Path, float]]:
@@ -836,13 +839,25 @@ def _loud_words(loud: dict) -> str:
 
 
 def _step_words(step_err: dict | None, j_noise: float) -> str:
-    """The unexplained answer's note when the model's own time-step error alone exceeds the noise objective."""
-    if step_err is None or not step_err["objective"] > j_noise:
+    """The unexplained answer's note when the model's own time-step error alone, extrapolated to the converged
+    model, exceeds the noise objective.
+
+    The half-step run's difference is a lower bound of the error (:func:`orchestrator.inverse.significance.step_error`);
+    Richardson's extrapolation at order :data:`SIGNAL_STEP_ORDER` gives the error against the converged model,
+    ``J_half x 2^p / (2^p - 1)`` (twice it at first order). Until 2026-11-29 the note compared the half-step
+    difference itself and stayed silent on issue 14's pad_local+mismatch 7101, where it read 0.95 x the noise
+    (RESULTS, session 32)."""
+    if step_err is None:
+        return ""
+    p = SIGNAL_STEP_ORDER
+    converged = step_err["objective"] * 2.0 ** p / (2.0 ** p - 1.0)
+    if not converged > j_noise:
         return ""
     g, v = max(step_err["groups"].items(), key=lambda kv: kv[1])
-    return (f"; the model's own time-step error alone is J {step_err['objective']:.3g} (its run at half the step "
-            f"{0.5 * step_err['step']:g} s differs most in group {g}, nRMSE {v:.3g}), above the noise: a finer "
-            f"simulation.step may resolve what no cause does at this one")
+    return (f"; the model's own time-step error alone is J {step_err['objective']:.3g} against its run at half the "
+            f"step ({0.5 * step_err['step']:g} s; most in group {g}, nRMSE {v:.3g}), about {converged:.3g} against "
+            f"the converged model (order {p}), above the noise: a finer simulation.step may resolve what no cause "
+            f"does at this one")
 
 
 def _legacy_named(answer: Answer, base: Evaluated, best: Evidence | None, best_label: str | None) -> CauseFit:

@@ -156,8 +156,9 @@ record does not hold: a quiet lead-in before the wheel arrives (field loggers re
 one; the field-like records start with the wheel already over the sensors), or repeated
 passes. What is also made: the diagnosis measures the model's step error
 (:func:`step_error`, one run of the reference at half its step) and reports it where the
-residual lives; an ``unexplained`` answer whose step error alone exceeds the noise
-objective says so.
+residual lives; an ``unexplained`` answer whose step error alone, extrapolated to the
+converged model (first order: twice the half-step difference, since 2026-11-29), exceeds
+the noise objective says so.
 """
 from __future__ import annotations
 
