@@ -279,3 +279,20 @@ def test_the_solid_crossing_rail_serves_as_truth(tmp_path):
     beam = truth_run(sc, layout)
     peak = {k: np.max(np.abs(r.signals["F1"])) for k, r in (("solid", solid), ("beam", beam))}
     assert abs(peak["solid"] / peak["beam"] - 1.0) > 0.05, peak
+
+
+
+def test_the_acquisition_filter_is_drawn_not_the_diagnosis_s():
+    """The field-like chain's anti-alias filter is drawn per case (fieldlike.AA_SHARE, AA_ORDERS), so the truth's
+    acquisition is not the diagnosis's comparison filter (0.4 x the rate, order 4, track.sensors): over 40 seeds
+    the corners spread over the range 0.35-0.45 (written here) and more than one order occurs. The filter comes
+    from a stream of its own, so a case's other chain draws do not depend on it: a chain drawn before the filter
+    was (pad_local+mismatch 7101's passage, written 2026-11-29 02:48 by 3666099: trigger 0.07858028594866613 s,
+    white 0.010733347859192343, coloured 0.014231541910618647, AR 0.8964004727587735) is drawn the same now."""
+    chains = [draw_case(seed, "null_clean", SLEEPERS, CHANNELS, "quarter").chain for seed in range(40)]
+    shares = np.array([c.aa_share for c in chains])
+    assert shares.min() >= 0.35 and shares.max() <= 0.45 and np.ptp(shares) > 0.05
+    assert len({c.aa_order for c in chains}) > 1
+    c = draw_case(7101, "pad_local+mismatch", SLEEPERS, CHANNELS, "quarter").chain
+    assert (c.trigger, c.white, c.coloured, c.ar) == (0.07858028594866613, 0.010733347859192343,
+                                                      0.014231541910618647, 0.8964004727587735)

@@ -301,7 +301,7 @@ def case_detectability(scenario, case: FieldCase, crop: float = 0.01, progress=N
     rate = acquisition_rate(t_sim, layout.rate)
     t_acq, _ = acquisition_times(t_sim, rate, crop)
     dt, hp = 1.0 / rate, layout.displacement_highpass
-    sampled = {s: sample_signals(r, layout, t_acq) for s, r in runs.items()}
+    sampled = {s: sample_signals(r, layout, t_acq, case.chain.aa_share, case.chain.aa_order) for s, r in runs.items()}
     clean = {s: noise_free(x, layout.types, dt, hp, case.chain) for s, x in sampled.items()}
     noise = chain_noise(sampled[full], layout.types, dt, hp, case.chain)
     total = signature("all effects" if case.effects else "no effect", clean[full], clean[None], noise, t_acq)

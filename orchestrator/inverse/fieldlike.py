@@ -13,9 +13,12 @@ Here a *case* (:class:`FieldCase`) hides three things, drawn per seed and per fa
 * ``mismatch`` (:class:`Mismatch`): the truth is another model: vehicle parameters
   (:data:`VEHICLE_MISMATCH`) each within +-20 %, the speed within +-4 %, the track's
   ballast and pad damping x0.6-1.6, a time step 2 or 4 times finer (output step kept);
-* the acquisition: the truth's output band-limited by an anti-alias filter at 0.4 x the
-  sampling rate (:func:`track.sensors.anti_alias`, since 2026-11-29; the diagnosis filters its
-  model the same way), then sampled;
+* the acquisition: the truth's output band-limited by an anti-alias filter, then sampled
+  (since 2026-11-29). Its corner and order are drawn per case (:data:`AA_SHARE`,
+  :data:`AA_ORDERS`, from a stream of their own so the other draws stay those of before):
+  the diagnosis band-limits its model at a fixed 0.4 x the rate, order 4
+  (:func:`track.sensors.anti_alias`), and is not told the chain's filter, as it is not
+  told a field logger's;
 * ``chain`` (:class:`Chain`): white noise, coloured noise (AR(1)), a slow drift (a
   sine below 1 Hz, under the reconstruction's 5 Hz high-pass corner), and in the
   ``faulty`` chain one channel with a gain error and an offset. For displacement
@@ -77,7 +80,7 @@ from orchestrator.inputs.measured import write_measured
 from orchestrator.inputs.sensor_layout import layout_of
 from orchestrator.inverse.synthetic import (TRIGGER_RANGE, Effect, acquisition_rate, acquisition_times,
                                             sample_signals, truth_run, variant_scenario)
-from track.sensors import displacement_from_acceleration
+from track.sensors import ANTI_ALIAS_ORDER, ANTI_ALIAS_SHARE, displacement_from_acceleration
 from vehicle.bogie import BogieParams
 from vehicle.quarter import QuarterParams
 
@@ -96,6 +99,9 @@ FAULTY_DRIFT = (0.01, 0.03)    # ... and in the faulty chain
 DRIFT_HZ = (0.1, 1.0)          # drift frequency [Hz], below the reconstruction's high-pass corner (5 Hz)
 GAIN_ERROR = ((0.85, 0.95), (1.05, 1.15))   # the faulty channel's gain
 OFFSET = (0.02, 0.08)          # the faulty channel's offset / its std (not on displacement channels)
+AA_SHARE = (0.35, 0.45)        # the acquisition's anti-alias corner / sampling rate (an analogue filter .. a
+                               # sigma-delta converter's pass-band edge)
+AA_ORDERS = (2, 4, 6, 8)       # its Butterworth order (run both ways: zero phase)
 KIND_FLOOR = 1.0               # a channel's noise scale is at least this share of its sensor kind's median std
 
 VEHICLE_MISMATCH = {           # vehicle kind -> (its parameter class, the parameters a case varies)
@@ -174,6 +180,10 @@ class Chain:
         Its gain.
     offset : float
         Its offset / its std (0 on displacement channels: the reconstruction removes it).
+    aa_share, aa_order : float, int
+        The acquisition's anti-alias filter: corner / sampling rate and Butterworth order
+        (:func:`track.sensors.anti_alias`; the defaults are the diagnosis's, the draws
+        :data:`AA_SHARE`, :data:`AA_ORDERS`).
     kind_floor : float
         The noise floor of a sensor kind: a channel's noise and drift scale with its own std,
         but not below this share of the median std of the channels of its kind
@@ -191,6 +201,8 @@ class Chain:
     gain: float = 1.0
     offset: float = 0.0
     kind_floor: float = 0.0
+    aa_share: float = ANTI_ALIAS_SHARE
+    aa_order: int = ANTI_ALIAS_ORDER
 
 
 @dataclass(frozen=True)
@@ -434,6 +446,8 @@ def draw_chain(rng: np.random.Generator, seed: int, channels, faulty: bool) -> C
     chain = Chain(seed, float(rng.uniform(*TRIGGER_RANGE)), float(rng.uniform(*WHITE)), float(rng.uniform(*COLOURED)),
                   float(rng.uniform(*AR_COEFFICIENT)), float(rng.uniform(*(FAULTY_DRIFT if faulty else DRIFT))),
                   kind_floor=KIND_FLOOR)
+    aa = np.random.default_rng([seed, 0xAA])   # its own stream: the draws above and below stay as they were
+    chain = replace(chain, aa_share=float(aa.uniform(*AA_SHARE)), aa_order=int(aa.choice(AA_ORDERS)))
     if not faulty:
         return chain
     gain = float(rng.uniform(*GAIN_ERROR[int(rng.integers(2))]))
@@ -512,7 +526,8 @@ def synthesize_case(scenario, case: FieldCase, out_file, crop: float = 0.01) -> 
     run = truth_run(variant_scenario(scenario, case.truth_raw(scenario.raw), f"<{case.family}>"), layout)
     rate = acquisition_rate(run.t, layout.rate)
     t_acq, t0 = acquisition_times(run.t, rate, crop)
-    channels = apply_chain(sample_signals(run, layout, t_acq), layout.types, 1.0 / rate,
+    sampled = sample_signals(run, layout, t_acq, case.chain.aa_share, case.chain.aa_order)
+    channels = apply_chain(sampled, layout.types, 1.0 / rate,
                            layout.displacement_highpass, case.chain)
     write_measured(out_file, t_acq - t0 + case.chain.trigger, channels)
     return {"case": case.as_dict(), "rate": rate, "time_offset": case.chain.trigger - t0, "file": str(out_file)}
@@ -521,4 +536,4 @@ def synthesize_case(scenario, case: FieldCase, out_file, crop: float = 0.01) -> 
 __all__ = ["FieldCase", "Mismatch", "Chain", "Family", "FAMILIES", "SLOW_FAMILIES", "EFFECT_DRAWS", "draw_case",
            "draw_mismatch", "draw_chain", "draw_void_gaps", "wedge_residual", "ar1", "disturbance", "noise_scales",
            "apply_chain", "instrumented_sleepers", "synthesize_case", "gain_and_reconstruct", "GRID_CLEARANCE",
-           "WEDGE_RESIDUAL_MIN", "DRIFT_HZ", "KIND_FLOOR"]
+           "WEDGE_RESIDUAL_MIN", "DRIFT_HZ", "KIND_FLOOR", "AA_SHARE", "AA_ORDERS"]

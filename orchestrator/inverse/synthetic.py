@@ -39,7 +39,7 @@ from orchestrator.inputs.causes import CATALOGUE, DRAWS
 from orchestrator.inputs.errors import UserInputError
 from orchestrator.inputs.measured import write_measured
 from orchestrator.inputs.sensor_layout import layout_of
-from track.sensors import anti_alias, displacement_from_acceleration
+from track.sensors import ANTI_ALIAS_ORDER, ANTI_ALIAS_SHARE, anti_alias, displacement_from_acceleration
 
 DEFAULT_NOISE = 0.01   # noise std / channel std
 MAX_RATE_SHARE = 0.5   # sampling rate <= this x the simulation's output rate (module docstring)
@@ -105,15 +105,18 @@ def acquisition_times(t_sim: np.ndarray, rate: float, crop: float) -> tuple[np.n
     return t0 + np.arange(int(np.floor((t1 - t0) * rate)) + 1) / rate, float(t0)
 
 
-def sample_signals(run: SensorRun, layout, t_acq: np.ndarray) -> dict:
+def sample_signals(run: SensorRun, layout, t_acq: np.ndarray, share: float = ANTI_ALIAS_SHARE,
+                   order: int = ANTI_ALIAS_ORDER) -> dict:
     """Every sensor's simulated signal at the acquisition times (cubic spline of the output samples), through
-    the acquisition's anti-alias filter first (:func:`track.sensors.anti_alias` at the rate of ``t_acq``).
+    the acquisition's anti-alias filter first (:func:`track.sensors.anti_alias` at the rate of ``t_acq``, corner
+    ``share`` x that rate, Butterworth ``order``; the defaults are the diagnosis's comparison filter).
 
     Displacement sensors stay accelerations [m/s^2] (what their accelerometer measures).
     """
     rate = 1.0 / float(np.median(np.diff(t_acq))) if len(t_acq) > 1 else 0.0
     ids = list(layout.ids)
-    on = CubicSpline(run.t, anti_alias(run.t, np.column_stack([run.signals[sid] for sid in ids]), rate))(t_acq)
+    band = anti_alias(run.t, np.column_stack([run.signals[sid] for sid in ids]), rate, share, order)
+    on = CubicSpline(run.t, band)(t_acq)
     return {sid: on[:, j] for j, sid in enumerate(ids)}
 
 
