@@ -893,3 +893,66 @@ def test_the_step_error_note_extrapolates_the_half_step_difference_to_the_conver
     assert "0.0402" in loud and f"{2 * 0.6 * j_noise:.3g}" in loud and "group E" in loud
     assert _step_words({**err, "objective": 0.4 * j_noise}, j_noise) == ""
     assert _step_words(None, j_noise) == ""
+
+
+def test_step_3c_releases_a_channel_gain_only_for_a_cause_that_explains_the_record_better(monkeypatch):
+    """Step 3c (diagnose._released), a logic check on hand-built records (the round judged again,
+    selection.rejudged, replaced by a fake that returns one fitted candidate on the target it is given).
+    The model's channels are four 8 Hz waves; sigma 1 % of each one's spread; step 2 took Q2 for
+    mis-calibrated, gain 1.25.
+
+    - A track effect that looks like a gain: the record's Q2 is the model's x 1.25, and Q1, on the same
+      sleeper, carries a 20 ms bump of 3 % of its spread. The candidate reproduces both: its J is below the
+      gain model's (which leaves Q1's bump) and its BIC on N_eff is more than DELTA_BIC below: released,
+      the cause's round returned, the gain gone from the target and the nuisance estimates, a note says why.
+    - A true gain fault: the record's Q2 is the model's x 1.25, the rest noise. The candidate reproduces Q2
+      but moves Q1 by the same bump: it passes the naming rule against the model without the gain (it removes
+      most of Q2's misfit) but fits worse than the gain: the gain stands, nothing changes but a note."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from orchestrator.inputs.causes import Candidate
+    from orchestrator.inverse import diagnose as dg
+    from orchestrator.inverse.nuisance import NuisanceFit
+    from orchestrator.inverse.screening import Evaluated
+    from orchestrator.inverse.selection import Round
+    from orchestrator.inverse.significance import assess
+
+    model, sd, _, bump, noise = _bump_misfit(31)
+    on_cause = {k: model[k] * (1.25 if k == "Q2" else 1.0) + (0.03 * sd[k] * bump if k == "Q1" else 0.0)
+                for k in model}
+
+    def case(record):
+        target = _fake_target({k: record[k] + noise[k] for k in model}, {k: 0.01 * sd[k] for k in model})
+        target.gains = {"Q2": 1.25}
+        ref = Evaluated(Candidate("none"), np.zeros(0), target.score(model), 0, "nominal")
+        nz = NuisanceFit({}, {}, {}, {}, {}, {"Q2": 1.25}, 0.0, ref.cmp, 20)
+        return SimpleNamespace(target=target), ref, nz
+
+    def fake_rejudged(pool, target, raw, bare, rd):
+        assert target.gains == {} and bare.cmp.objective > rd.reference.cmp.objective   # Q2's misfit is back
+        e = Evaluated(Candidate("ballast_void", 20), np.zeros(6), target.score(on_cause), 6, "fitted")
+        return Round(bare, 0, [e], [e], {}, {}, {})
+
+    monkeypatch.setattr(dg, "rejudged", fake_rejudged)
+
+    # a track effect that looks like a gain
+    inp, ref, nz = case(on_cause)
+    with_gain = inp.target
+    # round 1 saw the cause on the gain's model: there it does not pass (the gain is applied to it too)
+    assert not assess(with_gain.score(on_cause), 6, ref.cmp, 0, with_gain).passes
+    got = dg._released(None, inp, {}, ref, nz, Round(ref, 0, [], [], {}, {}, {}))
+    assert got is not None, nz.notes
+    bare, again = got
+    assert inp.target.gains == {} and nz.channel_gains == {} and nz.cmp is bare.cmp
+    assert again.real[0].candidate == Candidate("ballast_void", 20) and "released" in nz.notes[-1], nz.notes
+    assert again.real[0].cmp.objective < ref.cmp.objective
+
+    # a true gain fault
+    inp, ref, nz = case({k: model[k] * (1.25 if k == "Q2" else 1.0) for k in model})
+    before, without = inp.target, replace(inp.target, gains={})
+    # the candidate explains the channel against the model without the gain ...
+    assert assess(without.score(on_cause), 6, without.score(model), 0, without).passes
+    # ... but not as well as the gain does
+    assert dg._released(None, inp, {}, ref, nz, Round(ref, 0, [], [], {}, {}, {})) is None
+    assert inp.target is before and nz.channel_gains == {"Q2": 1.25} and "stands" in nz.notes[-1], nz.notes

@@ -29,6 +29,21 @@ module that applies it):
    24 removing 20 % of the explainable misfit; named at 25 with reach 3, gain 79 %). Only
    then, so a diagnosis that names a cause near the sensors pays no run for it (the default
    diagnosis would screen 8 more candidates, ~50 runs).
+3c. **A channel gain against the track** (:func:`_released`): when round 1 (with step 3b) still names
+   nothing and step 2 took a channel for mis-calibrated, that gain was chosen before any track cause
+   was looked at, and a track effect that only that channel sees clearly looks like one (a void under
+   the far end of sleeper 19 raises pressure cell A6, at the far end of sleeper 21). So the gain is
+   released and round 1 judged again without it: each candidate's dense search over round 1's
+   screening runs (no runs), the best confirmed and fitted (:func:`orchestrator.inverse.selection.rejudged`,
+   ~10-60 runs). A cause that passes the naming rule there *and* explains the record better than the
+   gain did — J lower, and its BIC on the effective sample size more than
+   :data:`~orchestrator.inverse.significance.DELTA_BIC` below the reference with the gain, the gain
+   counted as one fitted parameter — is named, and the gain is dropped (the nuisance notes say so).
+   Otherwise the gain stands and round 1's answer with it. Why: on issue 14's field-like matrix with
+   the drawn acquisition filter, void_sensor 7202 and void_sensor+mismatch 7404 (a void at 19, its
+   largest gap under the far end) had A6 taken for mis-calibrated (gains 1.30 and 1.17) and answered
+   ``unexplained`` and ``none``. A true gain fault is not at risk in the same way: a gain explains its
+   channel to the noise, where a track cause moves its neighbours too.
 4. **Naming** (:func:`_pick`): the best-ranked candidate that passes the rule of
    :mod:`orchestrator.inverse.significance` — significant on the effective sample size,
    removes at least a quarter of the explainable misfit, never makes the fit worse, and
@@ -165,10 +180,11 @@ from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.inverse.nuisance import NuisanceFit, widen_speed_for_step
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
-from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFitter, Round, cause_stages, select,
-                                             side_by_side, superposed_ranking, widen)
+from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFitter, Round, cause_stages, rejudged,
+                                             select, side_by_side, superposed_ranking, widen)
 from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, LOUD_FACTOR, MIN_SHARE, NONE_MARGIN, Evidence,
-                                               assess, at_noise_level, channel_neff, deviance, locate, step_error)
+                                               assess, at_noise_level, bic_eff, channel_neff, deviance, locate,
+                                               step_error)
 
 SENSOR_REACH = 1     # local causes on the sleepers carrying sensors +- this many (an effect just beyond them)
 FAR_REACH = 3        # ... and +- this many when round 1 names nothing above the noise (step 3b)
@@ -504,15 +520,19 @@ def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> Call
     pool.expect(1)
     pending = pool.submit([fine_raw])
 
+    gains = dict(inp.target.gains)
+
     def result() -> dict | None:
         from orchestrator.inverse.nuisance import speed_step_bias
 
-        cmp, why = checked_comparison(inp.target, pending()[0], ref.cmp)
+        # step 3c may have released a channel gain since: the reference compared as the half-step run is
+        ref_cmp = ref.cmp if inp.target.gains == gains else inp.target.score(ref.cmp.simulated)
+        cmp, why = checked_comparison(inp.target, pending()[0], ref_cmp)
         if cmp is None:
             pool.drop("the reference at half its time step", "step error", why)
             return None
-        a, bias = speed_step_bias(inp.target, ref.cmp, cmp)
-        return {"step": float(ref_raw["simulation"]["step"]), **step_error(ref.cmp, cmp, inp.target),
+        a, bias = speed_step_bias(inp.target, ref_cmp, cmp)
+        return {"step": float(ref_raw["simulation"]["step"]), **step_error(ref_cmp, cmp, inp.target),
                 "speed_ratio": a, "speed_bias": bias}
 
     return result
@@ -574,19 +594,56 @@ def _preferred(rd: Round, pick: Evaluated, tried: dict) -> list[Candidate]:
             if o.candidate.cause == pick.candidate.cause and tried[o.candidate].fails_only_share]
 
 
+def _released(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated, nz: NuisanceFit,
+              rd: Round) -> tuple[Evaluated, Round] | None:
+    """Step 3c (module doc): round 1, which named nothing, judged again with each channel gain of step 2
+    released in turn; the first release under which a cause is named and explains the record better than
+    the gain did is kept. Output: the reference's evaluation and the round judged again (``inp.target``,
+    ``nz``'s gains, comparison and notes changed), or None (nothing changed)."""
+    for k in sorted(inp.target.gains):
+        g = inp.target.gains[k]
+        target = replace(inp.target, gains={j: v for j, v in inp.target.gains.items() if j != k})
+        bare = Evaluated(ref.candidate, ref.values, target.score(ref.cmp.simulated), ref.k, ref.stage)
+        again = rejudged(pool, target, raw, bare, rd)
+        pick, ev, _ = _pick(again, target)
+        if pick is None:
+            why = "; ".join(ev.reasons) if ev is not None else "no candidate could be evaluated"
+            nz.notes.append(f"channel {k}: with its gain released no cause is named (the best {why}): the gain "
+                            "stands")
+            continue
+        neff = channel_neff(pick.cmp)
+        b_cause = bic_eff(pick.cmp, target.sigma, neff, pick.k)
+        b_gain = bic_eff(ref.cmp, inp.target.sigma, neff, 1)
+        words = (f"{pick.candidate.label}: J {pick.cmp.objective:.4g}, BIC on N_eff {b_cause:.1f}; the gain "
+                 f"{g:.3f}: J {ref.cmp.objective:.4g}, BIC {b_gain:.1f}")
+        if not (pick.cmp.objective < ref.cmp.objective and b_cause < b_gain - DELTA_BIC):
+            nz.notes.append(f"channel {k}: with its gain released, {words}: the gain explains the record as "
+                            "well or better and stands")
+            continue
+        inp.target = target
+        del nz.channel_gains[k]
+        nz.cmp = bare.cmp
+        nz.notes.append(f"channel {k}: gain {g:.3f} released (step 3c): a track cause explains the record better "
+                        f"({words})")
+        return bare, again
+    return None
+
+
 def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated,
-            nz: NuisanceFit) -> tuple[list[_Named], list[Round], dict, NuisanceFit, dict]:
+            nz: NuisanceFit) -> tuple[list[_Named], list[Round], dict, NuisanceFit, dict, Evaluated]:
     """Steps 3-5: round 1 over all candidates, then forward selection (module doc), with the time shift and
     the speed found again on the first named cause's model before round 2 (step 4b, :func:`_moved`).
 
     Output: the named causes (in order), the rounds, candidate -> evidence of every
     candidate tried for naming (per round: label keys ``round:label``), the nuisance estimates (``nz``,
-    updated by step 4b) and the reference scenario at their speed.
+    updated by step 4b), the reference scenario at their speed, and the reference's evaluation (``ref``,
+    or compared anew when step 3c released a channel gain).
     """
     named: list[_Named] = []
     raw, target = ref_raw, inp.target
     rounds = [select(pool, target, raw, ref, 0, inp.cands)]
     evidence = {}
+    released = False
     while True:
         rd = rounds[-1]
         pick, ev, tried = _pick(rd, target)
@@ -595,6 +652,13 @@ def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated,
             rounds[0] = widen(pool, target, raw, rd, far)
             inp.cands, inp.looked_further = inp.cands + far, True
             continue
+        if pick is None and len(rounds) == 1 and not released and inp.target.gains:   # step 3c
+            released = True
+            got = _released(pool, inp, raw, ref, nz, rd)
+            if got is not None:
+                ref, rounds[0] = got
+                target = inp.target
+                continue
         evidence.update({(len(rounds), c): v for c, v in tried.items()})
         if pick is None:
             break
@@ -612,7 +676,7 @@ def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated,
         rounds.append(select(pool, target, raw, start, sum(n.e.k for n in named), nxt, SECOND_CONFIRM))
     if len(named) == 2:
         _backfit(pool, target, ref_raw, ref, named)
-    return named, rounds, evidence, nz, ref_raw
+    return named, rounds, evidence, nz, ref_raw, ref
 
 
 def _aligned_again(pool: Pool, target: Target, nz: NuisanceFit, raw: dict, cmp: Comparison,
@@ -992,7 +1056,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
         base, baseline = _baseline(pool, inp)
         ref_raw, ref, nuisance = _nuisance(pool, inp, base)
         step_err = _step_error(pool, inp, ref_raw, ref)   # waited for after step 5c
-        named, rounds, evidence, nuisance, ref_raw = _rounds(pool, inp, ref_raw, ref, nuisance)
+        named, rounds, evidence, nuisance, ref_raw, ref = _rounds(pool, inp, ref_raw, ref, nuisance)
         ext_raw, final = (named[-1].raw, _final(named)) if named else (ref_raw, ref.cmp)
         entries, nuisance, ext_raw, final = _named_and_nuisance_again(pool, inp, named, nuisance, ext_raw, final)
         ext_raw, final = _causes_again(pool, inp, named, entries, nuisance, ext_raw, final)

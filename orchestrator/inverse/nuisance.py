@@ -52,6 +52,9 @@ catalogue's causes are screened:
    0.79-0.86 for two true 13 % faults and 0.46-0.85 on fault-free channels the old rule
    took for faults or that stood out as much). So the true faults on B3 and B1 of two such
    passages stay unfound (left to the residual; those two diagnoses answered ``unexplained`` and ``none``).
+   A gain accepted here was chosen before any track cause was looked at: when round 1 of the
+   diagnosis names nothing, it is released again if a track cause explains the record better
+   without it (:func:`orchestrator.inverse.diagnose._released`, step 3c).
 3. **Vehicle and track damping** (:func:`fit_vehicle_and_damping`). Bounded least squares
    (:func:`orchestrator.inverse.fitting.fit_unit_cube`, as the diagnosis's cause fits)
    of the wheelset mass, the primary stiffness and damping, the pads' and the bed's

@@ -284,6 +284,10 @@ class Round:
     screened : dict
         Candidate -> magnitude -> signals on the measured base (:func:`_screen`; of the
         candidate's best-fitting screening proxy).
+    proxies : dict
+        Candidate -> (its screening proxies as :func:`_axes` gives them, each proxy's magnitude ->
+        signals): every screening run, for judging the round again on another target
+        (:func:`rejudged`).
     """
 
     reference: Evaluated
@@ -294,6 +298,7 @@ class Round:
     twins: dict
     fitters: dict
     screened: dict = field(default_factory=dict)
+    proxies: dict = field(default_factory=dict)
 
 
 def _axes(kind, raw: dict, sleeper) -> list[tuple[np.ndarray | None, np.ndarray, float]]:
@@ -308,7 +313,8 @@ def _screen(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, 
     after the 96 runs of the default diagnosis). Failed variants are left out.
 
     Returns (candidate -> its screened evaluation, candidate -> the best proxy's magnitude -> signals),
-    as :func:`_search_one` gives them (candidates with < 2 magnitudes left out)."""
+    as :func:`_search_one` gives them (candidates with < 2 magnitudes left out), and candidate -> (its
+    axes, every proxy's magnitude -> signals) (:attr:`Round.proxies`)."""
     jobs = [(c, i, x) for c in cands for i, (_, xs, x0) in enumerate(axes[c]) for x in xs if abs(x - x0) > 1e-12]
     left = {c: sum(1 for j in jobs if j[0] == c) for c in cands}
     screened = {c: [{x0: ref.cmp.simulated} for _, _, x0 in axes[c]] for c in cands}
@@ -328,7 +334,8 @@ def _screen(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, 
     it = iter(jobs)   # pool.map hands the runs over in the order of the jobs
     pool.map([kind_of(c).apply_scalar(raw, c.sleeper, x, axes[c][i][0]) for c, i, x in jobs],
              then=lambda run: arrived(next(it), run))
-    return {c: dense[c] for c in cands if c in dense}, {c: grids[c] for c in cands if c in grids}
+    return ({c: dense[c] for c in cands if c in dense}, {c: grids[c] for c in cands if c in grids},
+            {c: (axes[c], screened[c]) for c in cands})
 
 
 def _search_one(target: Target, c, axes_c: list, screened_c: list, dense: dict, grids: dict) -> None:
@@ -427,10 +434,24 @@ def select(pool: Pool, target: Target, raw: dict, ref: Evaluated, k_ref: int, ca
     ``confirm``: how many of the screened candidates are re-run and fitted (the later
     rounds of forward selection confirm fewer: they screen only a few).
     """
-    final, grids, fitters = _explore(pool, target, raw, ref, cands, confirm)
+    final, grids, fitters, proxies = _explore(pool, target, raw, ref, cands, confirm)
     rd = _rank(target, ref, k_ref, final, fitters)
-    rd.screened = grids
+    rd.screened, rd.proxies = grids, proxies
     return rd
+
+
+def rejudged(pool: Pool, target: Target, raw: dict, ref: Evaluated, rd: Round, confirm: int = CONFIRM) -> Round:
+    """Round ``rd`` judged again on another ``target`` (the same measurement compared otherwise: a channel
+    gain released) with ``ref``, the reference's comparison on it: each candidate's dense search over
+    ``rd``'s screening runs (no runs), then confirmed, fitted and ranked as :func:`select` does."""
+    dense, grids = {}, {}
+    for c, (axes_c, screened_c) in rd.proxies.items():
+        _search_one(target, c, axes_c, screened_c, dense, grids)
+    confirmed = _confirm(pool, target, raw, ref, dense, confirm)
+    fitted, fitters = _fits(pool, target, raw, ref, confirmed)
+    out = _rank(target, ref, rd.k_ref, {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}, fitters)
+    out.screened, out.proxies = grids, rd.proxies
+    return out
 
 
 def _explore(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list, confirm: int) -> tuple:
@@ -438,20 +459,20 @@ def _explore(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list,
     screened; candidate -> its screening grid's signals; candidate -> its :class:`CauseFitter`)."""
     axes = {c: _axes(kind_of(c), raw, c.sleeper) for c in cands}
     pool.expect(sum(len(xs) - 1 for c in cands for _, xs, _ in axes[c]))
-    dense, grids = _screen(pool, target, raw, ref, cands, axes)
+    dense, grids, proxies = _screen(pool, target, raw, ref, cands, axes)
     confirmed = _confirm(pool, target, raw, ref, dense, confirm)
     fitted, fitters = _fits(pool, target, raw, ref, confirmed)
-    return {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}, grids, fitters
+    return {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}, grids, fitters, proxies
 
 
 def widen(pool: Pool, target: Target, raw: dict, rd: Round, more: list, confirm: int = CONFIRM) -> Round:
     """Round ``rd`` (of :func:`select`, on ``raw``) with the candidates ``more`` added: they are screened,
     confirmed (their ``confirm`` best) and fitted as :func:`select` does, and ranked with ``rd``'s, on the
     same reference, as one round (:func:`_rank`; ``rd``'s runs are not repeated)."""
-    final, grids, fitters = _explore(pool, target, raw, rd.reference, more, confirm)
+    final, grids, fitters, proxies = _explore(pool, target, raw, rd.reference, more, confirm)
     out = _rank(target, rd.reference, rd.k_ref, {**{e.candidate: e for e in rd.ranked}, **final},
                 {**rd.fitters, **fitters})
-    out.screened = {**rd.screened, **grids}
+    out.screened, out.proxies = {**rd.screened, **grids}, {**rd.proxies, **proxies}
     return out
 
 
@@ -476,5 +497,5 @@ def superposed_ranking(target: Target, first: Round, extended: Evaluated, cands:
     return [c for _, c in sorted(out, key=lambda t: t[0])]
 
 
-__all__ = ["select", "widen", "superposed_ranking", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO",
+__all__ = ["select", "widen", "rejudged", "superposed_ranking", "Round", "CauseFitter", "cause_stages", "CONFIRM", "FIT", "FIT_RATIO",
            "FIT_MAX_NFEV", "FINE_MAX_NFEV", "PENALTY"]
