@@ -543,6 +543,35 @@ def test_share_below_the_noise_objective_with_a_loud_channel_is_measured_against
     assert quiet.to_json()["share_of"] is None
 
 
+def test_share_is_measured_above_the_noise_and_the_models_own_step_error():
+    """The explainable misfit a cause's share is measured against excludes the model's own time-step error
+    (``Target.floor``, which every variant carries, so no cause can remove it): the floor is each channel's
+    noise nRMSE and step error added in quadrature. Built by hand: noise 1 % of each channel's spread, a step
+    error of 5 % on every channel, so J_floor = sqrt(0.01^2 + 0.05^2) = 0.05099; the reference's residual a
+    bump of 30 % of the spread on the noise (J_ref ~0.14), a cause leaving 24 % of it. Against J_ref - J_noise its share
+    is below the quarter; against J_ref - J_floor above it. Without a floor the share is the old one. (The bump is smooth: few
+    effective samples, so this one also fails the significance part; only the share is checked here.)"""
+    import math
+    from dataclasses import replace
+
+    from orchestrator.inverse.significance import MIN_SHARE, assess
+
+    channels, sd, target, bump, noise = _bump_misfit(13)
+    ref = _cmp_of(target, {k: 0.30 * sd[k] * bump + noise[k] for k in channels})
+    cause = _cmp_of(target, {k: 0.24 * sd[k] * bump + noise[k] for k in channels})
+    j_noise, j_floor = 0.01, math.hypot(0.01, 0.05)
+    assert ref.objective > (1 + 0.5) * j_floor, ref.objective   # above the floor's margin
+    old = (ref.objective - cause.objective) / (ref.objective - j_noise)
+    new = (ref.objective - cause.objective) / (ref.objective - j_floor)
+    assert old < MIN_SHARE <= new, (old, new)
+    ev = assess(cause, 1, ref, 0, replace(target, floor={k: 0.05 for k in channels}))
+    assert ev.share == pytest.approx(new, rel=1e-9) and "share" not in ev.failed, ev
+    assert ev.to_json()["objective_floor"] == pytest.approx(j_floor, rel=1e-9)
+    assert ev.to_json()["objective_noise"] == pytest.approx(j_noise, rel=1e-9)
+    bare = assess(cause, 1, ref, 0, target)
+    assert bare.share == pytest.approx(old, rel=1e-9) and "share" in bare.failed, bare
+
+
 def test_step_5c_keeps_the_best_point_of_all_paths(monkeypatch):
     """Step 5c (diagnose._nuisance_again) tries the nuisance refit, the speed found again on the refit's model,
     the joint refit with the named causes (last part), and the speed found again on the model given, and

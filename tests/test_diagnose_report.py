@@ -80,3 +80,12 @@ def test_the_verdict_names_what_a_share_was_measured_against():
     assert above == "90 % of the misfit above the noise"
     assert below.startswith("64 % of the noise objective's margin") and "0.057" in below
     assert "undefined" in report._share({"share_of_explainable_misfit": None})
+    # with the model's own time-step error in the floor (significance.floor_objective) the verdict names it
+    step = report._share({"share_of_explainable_misfit": 0.33, "share_of": "misfit_above_noise",
+                          "objective_reference": 0.19, "objective_noise": 0.067, "objective_floor": 0.11,
+                          "thresholds": limits})
+    assert step.startswith("33 % of the misfit above the noise and the model's own step error") and "0.11" in step
+    margin = report._share({"share_of_explainable_misfit": 0.3, "share_of": "noise_margin",
+                            "objective_reference": 0.12, "objective_noise": 0.067, "objective_floor": 0.11,
+                            "thresholds": limits})
+    assert "the model's step error" in margin and "0.11" in margin

@@ -519,17 +519,21 @@ def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> Call
     fine_raw["simulation"]["step"] = 0.5 * float(ref_raw["simulation"]["step"])
     pool.expect(1)
     pending = pool.submit([fine_raw])
-
     gains = dict(inp.target.gains)
+    got: list = []   # the run, once waited for (the function may be called more than once)
 
     def result() -> dict | None:
         from orchestrator.inverse.nuisance import speed_step_bias
 
+        if not got:
+            got.append(pending()[0])
         # step 3c may have released a channel gain since: the reference compared as the half-step run is
         ref_cmp = ref.cmp if inp.target.gains == gains else inp.target.score(ref.cmp.simulated)
-        cmp, why = checked_comparison(inp.target, pending()[0], ref_cmp)
+        cmp, why = checked_comparison(inp.target, got[0], ref_cmp)
         if cmp is None:
-            pool.drop("the reference at half its time step", "step error", why)
+            if len(got) == 1:
+                got.append(why)
+                pool.drop("the reference at half its time step", "step error", why)
             return None
         a, bias = speed_step_bias(inp.target, ref_cmp, cmp)
         return {"step": float(ref_raw["simulation"]["step"]), **step_error(ref_cmp, cmp, inp.target),
@@ -629,8 +633,18 @@ def _released(pool: Pool, inp: _Inputs, raw: dict, ref: Evaluated, nz: NuisanceF
     return None
 
 
-def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated,
-            nz: NuisanceFit) -> tuple[list[_Named], list[Round], dict, NuisanceFit, dict, Evaluated]:
+def _step_floor(step_json: dict | None) -> dict:
+    """Channel id -> the model's own time-step error against the converged model (the half-step difference
+    extrapolated at order :data:`SIGNAL_STEP_ORDER`, as :func:`_step_words` does): ``Target.floor``."""
+    if step_json is None:
+        return {}
+    p = SIGNAL_STEP_ORDER
+    return {k: v * 2.0 ** p / (2.0 ** p - 1.0) for k, v in step_json["channels"].items()}
+
+
+def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated, nz: NuisanceFit,
+            step_err: Callable[[], dict | None] = lambda: None) -> tuple[list[_Named], list[Round], dict,
+                                                                       NuisanceFit, dict, Evaluated]:
     """Steps 3-5: round 1 over all candidates, then forward selection (module doc), with the time shift and
     the speed found again on the first named cause's model before round 2 (step 4b, :func:`_moved`).
 
@@ -642,6 +656,7 @@ def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated,
     named: list[_Named] = []
     raw, target = ref_raw, inp.target
     rounds = [select(pool, target, raw, ref, 0, inp.cands)]
+    target.floor = _step_floor(step_err())   # the share's floor (step 4), once the half-step run is in
     evidence = {}
     released = False
     while True:
@@ -1056,7 +1071,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
         base, baseline = _baseline(pool, inp)
         ref_raw, ref, nuisance = _nuisance(pool, inp, base)
         step_err = _step_error(pool, inp, ref_raw, ref)   # waited for after step 5c
-        named, rounds, evidence, nuisance, ref_raw, ref = _rounds(pool, inp, ref_raw, ref, nuisance)
+        named, rounds, evidence, nuisance, ref_raw, ref = _rounds(pool, inp, ref_raw, ref, nuisance, step_err)
         ext_raw, final = (named[-1].raw, _final(named)) if named else (ref_raw, ref.cmp)
         entries, nuisance, ext_raw, final = _named_and_nuisance_again(pool, inp, named, nuisance, ext_raw, final)
         ext_raw, final = _causes_again(pool, inp, named, entries, nuisance, ext_raw, final)

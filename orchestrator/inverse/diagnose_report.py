@@ -151,8 +151,14 @@ def _share(s: dict) -> str:
     x = s.get("share_of_explainable_misfit")
     if x is None:
         return "an undefined share of the misfit above the noise"
+    j_noise = s["objective_noise"]
+    j_floor = s.get("objective_floor", j_noise)
+    step = j_floor > j_noise   # the floor holds the model's own time-step error (significance.floor_objective)
     if s.get("share_of") == "noise_margin":
-        return f"{100 * x:.0f} % of the noise objective's margin, {s['thresholds']['none_margin']:g} x {s['objective_noise']:.4g}"
+        what = "the floor's (noise and the model's step error)" if step else "the noise objective's"
+        return f"{100 * x:.0f} % of {what} margin, {s['thresholds']['none_margin']:g} x {j_floor:.4g}"
+    if step:
+        return f"{100 * x:.0f} % of the misfit above the noise and the model's own step error (J {j_floor:.4g})"
     return f"{100 * x:.0f} % of the misfit above the noise"
 
 

@@ -346,6 +346,12 @@ class Target:
         Sensor id -> gain g of a channel judged mis-calibrated (measured = g x true; set
         by :func:`orchestrator.inverse.nuisance.fit_nuisance`): every comparison scores
         ``g s - m`` on it. Empty: every channel as measured.
+    floor : dict
+        Sensor id -> the forward model's own time-step error on that channel, as an nRMSE
+        against the converged model (set by the diagnosis once its half-step run is in:
+        :func:`orchestrator.inverse.diagnose._step_error`). Part of the misfit no cause can
+        remove: the share a cause must take is measured above it and the noise
+        (:func:`orchestrator.inverse.significance.floor_objective`). Empty: the noise alone.
     """
 
     measured: object
@@ -354,6 +360,7 @@ class Target:
     shift: float | None = None
     scale: dict | None = None
     gains: dict = field(default_factory=dict)
+    floor: dict = field(default_factory=dict)
 
     @classmethod
     def read(cls, path, layout) -> "Target":
