@@ -520,19 +520,18 @@ def _step_error(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated) -> Call
     pool.expect(1)
     pending = pool.submit([fine_raw])
     gains = dict(inp.target.gains)
-    got: list = []   # the run, once waited for (the function may be called more than once)
+    runs: list = []   # the run, once waited for: the function is called after round 1 and again at the end
 
     def result() -> dict | None:
         from orchestrator.inverse.nuisance import speed_step_bias
 
-        if not got:
-            got.append(pending()[0])
+        if not runs:
+            runs.extend(pending())
         # step 3c may have released a channel gain since: the reference compared as the half-step run is
         ref_cmp = ref.cmp if inp.target.gains == gains else inp.target.score(ref.cmp.simulated)
-        cmp, why = checked_comparison(inp.target, got[0], ref_cmp)
+        cmp, why = checked_comparison(inp.target, runs[0], ref_cmp)
         if cmp is None:
-            if len(got) == 1:
-                got.append(why)
+            if not any(d.get("stage") == "step error" for d in pool.dropped):   # dropped once
                 pool.drop("the reference at half its time step", "step error", why)
             return None
         a, bias = speed_step_bias(inp.target, ref_cmp, cmp)
@@ -638,8 +637,14 @@ def _step_floor(step_json: dict | None) -> dict:
     extrapolated at order :data:`SIGNAL_STEP_ORDER`, as :func:`_step_words` does): ``Target.floor``."""
     if step_json is None:
         return {}
+    return {k: _converged(v) for k, v in step_json["channels"].items()}
+
+
+def _converged(half_step_difference: float) -> float:
+    """Richardson's extrapolation at order :data:`SIGNAL_STEP_ORDER`: the error against the converged model from
+    the difference to the run at half the step, ``d x 2^p / (2^p - 1)`` (twice it at first order)."""
     p = SIGNAL_STEP_ORDER
-    return {k: v * 2.0 ** p / (2.0 ** p - 1.0) for k, v in step_json["channels"].items()}
+    return half_step_difference * 2.0 ** p / (2.0 ** p - 1.0)
 
 
 def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated, nz: NuisanceFit,
@@ -929,7 +934,7 @@ def _step_words(step_err: dict | None, j_noise: float) -> str:
     if step_err is None:
         return ""
     p = SIGNAL_STEP_ORDER
-    converged = step_err["objective"] * 2.0 ** p / (2.0 ** p - 1.0)
+    converged = _converged(step_err["objective"])
     if not converged > j_noise:
         return ""
     g, v = max(step_err["groups"].items(), key=lambda kv: kv[1])
@@ -1070,7 +1075,7 @@ def diagnose(scenario_path, measured_path, out_dir, validate=(), workers: int | 
     try:
         base, baseline = _baseline(pool, inp)
         ref_raw, ref, nuisance = _nuisance(pool, inp, base)
-        step_err = _step_error(pool, inp, ref_raw, ref)   # waited for after step 5c
+        step_err = _step_error(pool, inp, ref_raw, ref)   # runs beside round 1's screening, waited for after it
         named, rounds, evidence, nuisance, ref_raw, ref = _rounds(pool, inp, ref_raw, ref, nuisance, step_err)
         ext_raw, final = (named[-1].raw, _final(named)) if named else (ref_raw, ref.cmp)
         entries, nuisance, ext_raw, final = _named_and_nuisance_again(pool, inp, named, nuisance, ext_raw, final)

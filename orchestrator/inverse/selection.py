@@ -447,9 +447,8 @@ def rejudged(pool: Pool, target: Target, raw: dict, ref: Evaluated, rd: Round, c
     dense, grids = {}, {}
     for c, (axes_c, screened_c) in rd.proxies.items():
         _search_one(target, c, axes_c, screened_c, dense, grids)
-    confirmed = _confirm(pool, target, raw, ref, dense, confirm)
-    fitted, fitters = _fits(pool, target, raw, ref, confirmed)
-    out = _rank(target, ref, rd.k_ref, {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}, fitters)
+    final, fitters = _settle(pool, target, raw, ref, dense, confirm)
+    out = _rank(target, ref, rd.k_ref, final, fitters)
     out.screened, out.proxies = grids, rd.proxies
     return out
 
@@ -460,9 +459,16 @@ def _explore(pool: Pool, target: Target, raw: dict, ref: Evaluated, cands: list,
     axes = {c: _axes(kind_of(c), raw, c.sleeper) for c in cands}
     pool.expect(sum(len(xs) - 1 for c in cands for _, xs, _ in axes[c]))
     dense, grids, proxies = _screen(pool, target, raw, ref, cands, axes)
+    final, fitters = _settle(pool, target, raw, ref, dense, confirm)
+    return final, grids, fitters, proxies
+
+
+def _settle(pool: Pool, target: Target, raw: dict, ref: Evaluated, dense: dict, confirm: int) -> tuple[dict, dict]:
+    """Steps 3-4 from the screened candidates ``dense``: (candidate -> its last evaluation, fitted else
+    confirmed else screened; candidate -> its :class:`CauseFitter`)."""
     confirmed = _confirm(pool, target, raw, ref, dense, confirm)
     fitted, fitters = _fits(pool, target, raw, ref, confirmed)
-    return {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}, grids, fitters, proxies
+    return {c: fitted.get(c) or confirmed.get(c) or dense[c] for c in dense}, fitters
 
 
 def widen(pool: Pool, target: Target, raw: dict, rd: Round, more: list, confirm: int = CONFIRM) -> Round:

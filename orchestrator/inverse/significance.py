@@ -257,8 +257,7 @@ def floor_objective(target, cmp: Comparison) -> float:
     """J of the floor no cause can lower (module doc, 2.): per channel the noise's nRMSE and the model's own
     time-step error (``target.floor``, against the converged model) added in quadrature — independent errors;
     :func:`noise_objective` when the target has no step floor."""
-    floor = getattr(target, "floor", None) or {}
-    nrmse = {k: math.hypot(v, floor.get(k, 0.0)) for k, v in _noise_nrmse(target, cmp).items()}
+    nrmse = {k: math.hypot(v, target.floor.get(k, 0.0)) for k, v in _noise_nrmse(target, cmp).items()}
     return objective_from_channels(nrmse, target.layout.groups, target.layout.weights)[0]
 
 
