@@ -47,9 +47,13 @@ def _side_dir(calls_dir: Path, run_dir: Path) -> Path:
 
 
 def _count_call(calls_dir: Path, run_dir: Path) -> None:
+    """One more call of the run, written atomically: when the pool breaks, the other worker is killed wherever
+    it is, and a count file truncated by a plain write but not yet written read '' (a flaky CI failure)."""
     counter = _side_dir(calls_dir, run_dir) / "count"
     n = int(counter.read_text()) if counter.exists() else 0
-    counter.write_text(str(n + 1))
+    tmp = counter.with_name(f"count.{os.getpid()}")
+    tmp.write_text(str(n + 1))
+    os.replace(tmp, counter)
 
 
 def product_run(scenario, run_dir: Path, *, calls_dir: Path) -> dict:
@@ -94,7 +98,8 @@ def read_table(path: Path) -> list[dict]:
 
 def calls(tmp_path: Path) -> dict[str, int]:
     folder = tmp_path / "calls"
-    return {p.name: int((p / "count").read_text()) for p in folder.iterdir()} if folder.exists() else {}
+    return {p.name: int((p / "count").read_text()) if (p / "count").exists() else 0
+            for p in folder.iterdir()} if folder.exists() else {}   # 0: killed before its first count landed
 
 
 def finished(out: Path) -> set[str]:
