@@ -933,14 +933,13 @@ def _step_words(step_err: dict | None, j_noise: float) -> str:
     (RESULTS, session 32)."""
     if step_err is None:
         return ""
-    p = SIGNAL_STEP_ORDER
     converged = _converged(step_err["objective"])
     if not converged > j_noise:
         return ""
     g, v = max(step_err["groups"].items(), key=lambda kv: kv[1])
     return (f"; the model's own time-step error alone is J {step_err['objective']:.3g} against its run at half the "
             f"step ({0.5 * step_err['step']:g} s; most in group {g}, nRMSE {v:.3g}), about {converged:.3g} against "
-            f"the converged model (order {p}), above the noise: a finer simulation.step may resolve what no cause "
+            f"the converged model (order {SIGNAL_STEP_ORDER}), above the noise: a finer simulation.step may resolve what no cause "
             f"does at this one")
 
 

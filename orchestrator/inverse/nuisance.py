@@ -431,14 +431,15 @@ def neighbourhoods(sensors) -> dict:
     return out
 
 
-def gain_fit(m: np.ndarray, s: np.ndarray) -> tuple[float, np.ndarray]:
-    """A channel's least-squares gain with an offset, ``m ~ c + g s`` (module doc, stage 2), and the residual
-    ``r = m - c - g s`` over the samples where both are finite; ``g`` is NaN without a spread of ``s``."""
+def gain_fit(m: np.ndarray, s: np.ndarray) -> tuple[float, np.ndarray, float]:
+    """A channel's least-squares gain with an offset, ``m ~ c + g s`` (module doc, stage 2), over the samples
+    where both are finite: ``g`` (NaN without a spread of ``s``), the residual ``r = m - c - g s`` and
+    ``sum (s - mean s)^2``."""
     ok = np.isfinite(s) & np.isfinite(m)
     sc, mc = s[ok] - np.mean(s[ok]), m[ok] - np.mean(m[ok])
     ss = float(sc @ sc)
     g = float(sc @ mc) / ss if ss > 0 else float("nan")
-    return g, mc - (g if ss > 0 else 0.0) * sc
+    return g, (mc - g * sc if ss > 0 else mc), ss
 
 
 def channel_log_gains(target: Target, cmp: Comparison) -> dict:
@@ -451,16 +452,13 @@ def channel_log_gains(target: Target, cmp: Comparison) -> dict:
     return out
 
 
-def log_gain_error(m: np.ndarray, s: np.ndarray) -> float:
-    """Standard error of ``ln g`` (:func:`gain_fit`) on the residual's effective sample size (module doc,
-    stage 2): ``se(g) = sqrt(mean(r^2) tau_r / sum (s - mean s)^2)``, ``tau_r`` the residual's integrated
+def log_gain_error(g: float, r: np.ndarray, ss: float) -> float:
+    """Standard error of ``ln g`` of a :func:`gain_fit` ``(g, r, ss)`` on the residual's effective sample size
+    (module doc, stage 2): ``se(g) = sqrt(mean(r^2) tau_r / ss)``, ``tau_r`` the residual's integrated
     autocorrelation time (:func:`~orchestrator.inverse.significance.integrated_time`), over ``g``. Infinite
     when the gain is not positive (no gain to judge)."""
-    g, r = gain_fit(m, s)
     if not g > 0:
         return float("inf")
-    s = s[np.isfinite(s) & np.isfinite(m)]
-    ss = float(np.sum((s - np.mean(s)) ** 2))
     return math.sqrt(float(np.mean(r * r)) * integrated_time(r) / ss) / g
 
 
@@ -485,9 +483,10 @@ def sensor_gains(target: Target, cmp: Comparison, neighbours: dict) -> tuple[dic
         near = [lg[j] for j in neighbours.get(k, ()) if j in lg and (displacement or types.get(j) != "displacement")]
         if any(not np.isfinite(y) or abs(y) > NEIGHBOUR_DEV for y in near):
             continue     # the neighbourhood moved: a track cause, not this channel's gain
-        if not displacement and loudness(gain_fit(target.measured.channels[k], cmp.simulated[k])[1]) > LOUD_FACTOR:
+        fit = gain_fit(target.measured.channels[k], cmp.simulated[k])
+        if not displacement and loudness(fit[1]) > LOUD_FACTOR:
             continue     # the gain leaves the channel above its noise: its shape changed, not its calibration
-        if abs(x - med) <= GAIN_Z * log_gain_error(target.measured.channels[k], cmp.simulated[k]):
+        if abs(x - med) <= GAIN_Z * log_gain_error(*fit):
             continue     # within what the channel's own correlated residual lets the gain scatter
         accepted[k] = math.exp(x)
     return accepted, lg
@@ -1101,6 +1100,6 @@ def speed_again(pool, target: Target, nz: NuisanceFit, raw_ext: dict, start: Com
     return nz, raw_v, cmp
 
 
-__all__ = ["NuisanceFit", "fit_nuisance", "speed_from_data", "speed_corrected", "sensor_gains", "gain_fit", "log_gain_error", "neighbourhoods",
-           "channel_log_gains", "fit_vehicle_and_damping", "refit_accepted", "refit_with_causes", "speed_again",
-           "speed_step_bias", "widen_speed_for_step", "effective_samples", "resolved_sensors", "PRIORS"]
+__all__ = ["NuisanceFit", "fit_nuisance", "speed_from_data", "speed_corrected", "sensor_gains", "neighbourhoods",
+           "gain_fit", "log_gain_error", "channel_log_gains", "fit_vehicle_and_damping", "refit_accepted",
+           "refit_with_causes", "speed_again", "speed_step_bias", "widen_speed_for_step", "effective_samples", "resolved_sensors", "PRIORS"]
