@@ -86,6 +86,17 @@ module that applies it):
    ranks it 7th of 9, not among those screened again; with the truth's void the pad
    removes 94 % of J. Re-fitting the first cause with each second *candidate* (stepwise
    regression's refit) would address that, at ~70 runs per void refit: not done.
+   **And the candidates where the residual lives** (:func:`_at_the_residual`): when the residual
+   left by the named cause is above the noise, round 1's local candidates at the sleeper nearest
+   its peak (:func:`orchestrator.inverse.significance.locate`, on the extended model after step 4b)
+   are screened too. Superposition is first order; an effect under the impact interacts with the
+   first cause: on field-like two_nose_void 7505 (nose 18.8 mrad, a void at 23 hanging 2.25 mm at
+   its far end) the void's round-1 increments, superposed on the worn-nose model, changed J by
+   under 0.3 % for every candidate (0.1213-0.1222 against 0.1222), so void@23 ranked 7th and was
+   never run, while screened and fitted for real on that model it removed 37 % of the explainable
+   misfit and was named (gain 84 % against 79 %). The residual's peak lay at 23. Costs ~15 runs
+   per candidate added, only when a cause is named above the noise and the site is not already
+   among the chosen (2026-11-29, benchmarks/RESULTS.md, session 35).
 5b. **Backfitting** (:func:`_backfit`): once a second cause is named, each named cause's
    parameters are fitted again (all of them, from their current values) on the model with
    the other at its latest values, first cause first — one pass of backfitting, so the
@@ -691,6 +702,7 @@ def _rounds(pool: Pool, inp: _Inputs, ref_raw: dict, ref: Evaluated, nz: Nuisanc
         if not nxt:
             break
         target, nz, raw, cmp = _moved(pool, target, nz, raw, pick.cmp, f"{c.label}, before round 2")
+        nxt = nxt + _at_the_residual(inp, target, cmp, float(raw["vehicle"]["speed"]), named, nxt)
         start = pick if cmp is pick.cmp else Evaluated(c, pick.values, cmp, pick.k, pick.stage)
         named[-1].raw, named[-1].moved, ref_raw = raw, (None if cmp is pick.cmp else cmp), nz.raw
         rounds.append(select(pool, target, raw, start, sum(n.e.k for n in named), nxt, SECOND_CONFIRM))
@@ -828,6 +840,18 @@ def _second_round(target: Target, first: Round, named: list[_Named]) -> list[Can
     taken = [n.e.candidate for n in named]
     free = [c for c in first.screened if not any(_same_site(c, t) for t in taken)]
     return superposed_ranking(target, first, named[-1].e, free)[:SECOND_ROUND]
+
+
+def _at_the_residual(inp: _Inputs, target: Target, cmp: Comparison, speed: float, named: list[_Named],
+                     chosen: list[Candidate]) -> list[Candidate]:
+    """Step 5: round 1's local candidates at the sleeper nearest the peak of the residual left by the named
+    cause(s) (``cmp``; :func:`orchestrator.inverse.significance.locate`), not yet ``chosen`` nor on a named
+    cause's site; none when that residual is at the noise level (module doc)."""
+    if at_noise_level(cmp, target)[0]:
+        return []
+    k = locate(cmp, target, inp.sensors, inp.sleeper_x, inp.x_start, speed)["sleeper_nearest_peak"]
+    taken = [n.e.candidate for n in named]
+    return [c for c in inp.cands if c.sleeper == k and c not in chosen and not any(_same_site(c, t) for t in taken)]
 
 
 def _entry(e: Evaluated, rd: Round, rnd: int, ev: Evidence | None) -> CauseFit:
