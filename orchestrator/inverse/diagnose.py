@@ -94,9 +94,10 @@ module that applies it):
    its far end) the void's round-1 increments, superposed on the worn-nose model, changed J by
    under 0.3 % for every candidate (0.1213-0.1222 against 0.1222), so void@23 ranked 7th and was
    never run, while screened and fitted for real on that model it removed 37 % of the explainable
-   misfit and was named (gain 84 % against 79 %). The residual's peak lay at 23. Costs ~15 runs
-   per candidate added, only when a cause is named above the noise and the site is not already
-   among the chosen (2026-11-29, benchmarks/RESULTS.md, session 35).
+   misfit and was named (gain 84 % against 79 %). The residual's peak lay at 23. Costs one
+   candidate's screening (and fit, when it ranks among the confirmed), only when a cause is named
+   above the noise and the site is not already chosen: +1.1 % runs over the 119 passages of that
+   matrix (2026-11-29, benchmarks/RESULTS.md, session 35).
 5b. **Backfitting** (:func:`_backfit`): once a second cause is named, each named cause's
    parameters are fitted again (all of them, from their current values) on the model with
    the other at its latest values, first cause first — one pass of backfitting, so the
