@@ -838,9 +838,13 @@ def _final(named: list[_Named]) -> Comparison:
 def _second_round(target: Target, first: Round, named: list[_Named]) -> list[Candidate]:
     """Step 5: the :data:`SECOND_ROUND` candidates whose round-1 screening, superposed on the extended model,
     fits best (:func:`orchestrator.inverse.selection.superposed_ranking`; no runs), none on a named cause's site."""
+    return superposed_ranking(target, first, named[-1].e, _free(first.screened, named))[:SECOND_ROUND]
+
+
+def _free(cands, named: list[_Named]) -> list[Candidate]:
+    """The candidates of ``cands`` on no named cause's site (one would overwrite the other)."""
     taken = [n.e.candidate for n in named]
-    free = [c for c in first.screened if not any(_same_site(c, t) for t in taken)]
-    return superposed_ranking(target, first, named[-1].e, free)[:SECOND_ROUND]
+    return [c for c in cands if not any(_same_site(c, t) for t in taken)]
 
 
 def _at_the_residual(inp: _Inputs, target: Target, cmp: Comparison, speed: float, named: list[_Named],
@@ -851,8 +855,7 @@ def _at_the_residual(inp: _Inputs, target: Target, cmp: Comparison, speed: float
     if at_noise_level(cmp, target)[0]:
         return []
     k = locate(cmp, target, inp.sensors, inp.sleeper_x, inp.x_start, speed)["sleeper_nearest_peak"]
-    taken = [n.e.candidate for n in named]
-    return [c for c in inp.cands if c.sleeper == k and c not in chosen and not any(_same_site(c, t) for t in taken)]
+    return [c for c in _free(inp.cands, named) if c.sleeper == k and c not in chosen]
 
 
 def _entry(e: Evaluated, rd: Round, rnd: int, ev: Evidence | None) -> CauseFit:
