@@ -50,7 +50,11 @@ model-form mismatch, the mismatch stay in J. Cached per case folder (``truth_gai
 the summary then gives, per group, how many right answers below the acceptance's gain have
 a truth that is below it as well, and each of those cases' two gains. It says whether a
 gain below the target is the diagnosis's shortfall or the record's; it does not change the
-count against the target.
+count against the target. Also the acceptance's gain read as a share of the truth's own
+(named / truth: the misfit removed over what the true effects remove, the truth's J as the
+floor), over the named right answers — a figure for the owner's open question on issue 14
+(keep the chain's noise in J, or measure the gain over what the record lets a cause explain),
+not the acceptance's count.
 
 Run: python benchmarks/bench_diagnose_field.py [--seeds 3] [--families a,b,...] [--workers 2] [--record]
      [--stage all|synth|diagnose] [--report-only] [--detectability] [--truth-gain] [--out DIR]
@@ -481,6 +485,10 @@ def _truth_gain_lines(right: list[tuple[float, dict]], need: float, truth: dict 
            + (f"; named minus truth over the {len(named)} named: median "
               f"{100 * float(np.median([a - t for a, _, t in named])):+.1f} points, lowest "
               f"{100 * min(a - t for a, _, t in named):+.1f}" if named else "")]
+    if named:     # the acceptance's gain read as a share of what the truth itself achieves on this record
+        share = [a / t if t > 0 else float(a >= t) for a, _, t in named]
+        out.append(f"  - read as a share of the truth's own gain (named / truth, the truth's J as the floor): "
+                   f">= {_pct(need)} in {sum(x >= need for x in share)}/{len(named)}, lowest {_pct(min(share))}")
     below = [x for x in known if x[0] < need]
     if below:
         cases = "; ".join(f"{r['family']} {r['seed']} {_pct(a)} (truth {_pct(t)})" for a, r, t in below)

@@ -116,7 +116,10 @@ catalogue's causes are screened:
 4. **Again, with the named causes** (:func:`refit_with_causes`, called by the diagnosis once
    causes are named): stage 3's vehicle and damping values and the shift (not the speed) fitted
    once more on the extended model, from stage 3's values, in its box and by its acceptance rule
-   (a Jacobian there, three Broyden-updated Gauss-Newton steps); its values, intervals and
+   (a Jacobian there, three Broyden-updated Gauss-Newton steps that leave out the directions the
+   data do not determine where the step along them would leave the box, :func:`_gauss_newton_step`,
+   since 2026-11-29; stage 3's single step keeps them: a vehicle value the data want beyond its box
+   is pressed against the edge there, and refused, by design); its values, intervals and
    acceptance are reported when the caller keeps it. :func:`refit_jointly` does the same with
    the named causes' parameters free beside them (a cause and a vehicle value that took up part
    of it are coupled: one pass of backfitting leaves both short).
@@ -559,9 +562,36 @@ def effective_samples(cmp: Comparison) -> tuple[int, float]:
     return n_all, max(n_eff, 1.0)
 
 
-def _gauss_newton_step(J: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """The linearised model's step to the least-squares optimum, ``-(J^T J)^+ J^T r``."""
-    return -np.linalg.pinv(J.T @ J) @ (J.T @ r)
+def _noise_scale(r: np.ndarray, p: int, cmp: Comparison) -> float:
+    """The residuals' standard deviation per effective sample: ``sqrt(RSS / (N - p) * N / N_eff)``, in the
+    units of ``r`` (a parameter's variance is this squared over its Jacobian's (J^T J) — :func:`_intervals`)."""
+    n, n_eff = effective_samples(cmp)
+    return math.sqrt(float(r @ r) / max(np.count_nonzero(r) - p, 1) * (n / n_eff))
+
+
+def _gauss_newton_step(J: np.ndarray, r: np.ndarray, sigma: float = 0.0) -> np.ndarray:
+    """The linearised model's step to the least-squares optimum, ``-(J^T J)^+ J^T r``, without the directions
+    it extrapolates noise along: a singular vector of ``J`` whose singular value ``s`` is below ``Z90 sigma``
+    (``sigma``: the residuals' :func:`_noise_scale`) *and* along which the step is longer than the box is wide
+    (1 in the unit cube).
+
+    Why: along a singular vector the 90 % interval's half-width is ``Z90 sigma / s`` (unit cube); below
+    ``Z90 sigma`` it is wider than the whole box and the residuals do not say where the optimum lies along
+    it. A step there within the box moves the point within what the data allow (kept: it is also where a
+    model-form error is shared between coupled parameters, and the Broyden steps keep it only if J falls);
+    a step beyond the box is ``1 / s`` times a residual the direction hardly feels, and clipped, it throws
+    the parameters to the box's edge. Measured on issue 14's field-like void_off_sensor 7202 (a void two
+    sleepers beyond the sensors, its sleeper hanging clear of the bed: J flat in its gaps), step 5c's joint
+    refit: singular values 2e-8 .. 4e-26 against 0.009 and more for the others, a step of +2.2e4 in each
+    gap, and the six gaps at the box's 4 mm after it (RESULTS, session 35)."""
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    if not s.size or s[0] <= 0.0:
+        return np.zeros(J.shape[1])
+    live = s > 1e-15 * s[0]               # numpy's pinv's own cut-off
+    c = np.zeros_like(s)
+    c[live] = -(U[:, live].T @ r) / s[live]
+    c[(s < Z90 * sigma) & (np.abs(c) > 1.0)] = 0.0
+    return Vt.T @ c
 
 
 def _intervals(J: np.ndarray, r: np.ndarray, u: np.ndarray, cmp: Comparison) -> tuple[np.ndarray, np.ndarray]:
@@ -572,10 +602,8 @@ def _intervals(J: np.ndarray, r: np.ndarray, u: np.ndarray, cmp: Comparison) -> 
     iterations on a flat valley (the vehicle's parameters trade off) is not at its optimum,
     and the purely statistical interval would be centred on the wrong point.
     """
-    n, n_eff = effective_samples(cmp)
-    p = u.size
-    s2 = float(r @ r) / max(np.count_nonzero(r) - p, 1)
-    cov = np.linalg.pinv(J.T @ J) * s2 * (n / n_eff)
+    sigma = _noise_scale(r, u.size, cmp)
+    cov = np.linalg.pinv(J.T @ J) * sigma ** 2
     half = Z90 * np.sqrt(np.clip(np.diag(cov), 0.0, None)) + np.abs(_gauss_newton_step(J, r))
     half = np.where(np.diag(J.T @ J) > 0, half, np.inf)   # a parameter the residuals do not feel
     return u - half, u + half
@@ -851,7 +879,7 @@ def _broyden_steps(rn: _Runs, J: np.ndarray, u: np.ndarray, r: np.ndarray, cmp: 
     ``cmp``), one run each, ``J`` updated by Broyden's rule after each; a step that does not lower the residual
     ends them. Returns the updated Jacobian and the best point, its residuals and comparison."""
     for _ in range(REFIT_STEPS):
-        du = np.clip(u + _gauss_newton_step(J, r), 0.0, 1.0) - u
+        du = np.clip(u + _gauss_newton_step(J, r, _noise_scale(r, u.size, cmp)), 0.0, 1.0) - u
         du[~free] = 0.0
         if not np.any(np.abs(du) > 1e-6):
             break
