@@ -369,12 +369,12 @@ def test_gauss_newton_step_leaves_out_noise_extrapolated_beyond_the_box():
     """nuisance._gauss_newton_step on hand-built linear problems with closed-form answers.
 
     Residuals r = -0.3 x + e over 400 samples (x a known regressor, e noise of std 0.01): the first
-    entry's least-squares step, by hand, is (x . -r) / (x . x). (1) A second column of round-off
-    (1e-12 x a random vector, as the gaps of a void whose sleeper hangs clear of the bed give:
-    RESULTS, session 35, void_off_sensor 7202): its singular value (~2e-11) is far below Z90 sigma
-    (~0.016) and the step along it, round-off over round-off, is orders of magnitude beyond the unit
-    box — left out, the second entry's step is 0 (to round-off); without sigma (the uncut
-    pseudo-inverse) it is > 1e3. (2) A column orthogonal to x with the residual's component along it
+    entry's least-squares step, by hand, is (x . -r) / (x . x). (1) A second column the residuals
+    hardly feel (1e-6 x a random vector, as the gaps of a void whose sleeper hangs clear of the bed
+    give: RESULTS, session 35, void_off_sensor 7202): its singular value (~2e-5) is far below Z90
+    sigma (~0.016) and the step along it, the noise's projection over it, is far beyond the unit box
+    — left out, the second entry's step is 0 (to round-off); without sigma (the uncut
+    pseudo-inverse) it is > 10. (2) A column orthogonal to x with the residual's component along it
     set so the least-squares step there is exactly c: kept when its singular value is 2 Z90 sigma
     (determined) whatever c, and at 0.5 Z90 sigma (undetermined) when the step stays in the box
     (c = 0.5); left out there when it would leave the box (c = 3). Tolerance 1e-12: an SVD solve
@@ -384,12 +384,14 @@ def test_gauss_newton_step_leaves_out_noise_extrapolated_beyond_the_box():
     rng = np.random.default_rng(5)
     x = np.sin(np.linspace(0.0, 6.0, 400))
     r = -0.3 * x + 0.01 * rng.standard_normal(400)
-    J = np.column_stack([x, 1e-12 * rng.standard_normal(400)])
+    flat = 1e-6 * rng.standard_normal(400)
+    flat -= (flat @ x) / (x @ x) * x                        # orthogonal to x: its own singular vector
+    J = np.column_stack([x, flat])
     sigma = float(np.std(r + 0.3 * x))
     by_hand = float(x @ -r) / float(x @ x)
     step = _gauss_newton_step(J, r, sigma)                                                   # (1)
     assert step[0] == pytest.approx(by_hand, abs=1e-12) and abs(step[1]) < 1e-12
-    assert abs(_gauss_newton_step(J, r)[1]) > 1e3
+    assert abs(_gauss_newton_step(J, r)[1]) > 10.0
     y = rng.standard_normal(400)
     y -= (y @ x) / (x @ x) * x                              # orthogonal to x: y's own singular vector
     y_hat = y / np.linalg.norm(y)

@@ -587,7 +587,7 @@ def _gauss_newton_step(J: np.ndarray, r: np.ndarray, sigma: float = 0.0) -> np.n
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     if not s.size or s[0] <= 0.0:
         return np.zeros(J.shape[1])
-    live = s > 1e-15 * s[0]               # numpy's pinv's own cut-off
+    live = s ** 2 > 1e-15 * s[0] ** 2     # as the pseudo-inverse of J^T J with numpy's default cut-off did
     c = np.zeros_like(s)
     c[live] = -(U[:, live].T @ r) / s[live]
     c[(s < Z90 * sigma) & (np.abs(c) > 1.0)] = 0.0
