@@ -364,7 +364,6 @@ def test_refit_accepted_moves_only_the_free_entries_to_their_optimum():
     assert np.array_equal(refit_accepted(residuals, best, free), best)
 
 
-
 def test_gauss_newton_step_leaves_out_noise_extrapolated_beyond_the_box():
     """nuisance._gauss_newton_step on hand-built linear problems with closed-form answers.
 
@@ -391,6 +390,8 @@ def test_gauss_newton_step_leaves_out_noise_extrapolated_beyond_the_box():
     by_hand = float(x @ -r) / float(x @ x)
     step = _gauss_newton_step(J, r, sigma)                                                   # (1)
     assert step[0] == pytest.approx(by_hand, abs=1e-12) and abs(step[1]) < 1e-12
+    # the uncut step along it is the noise's projection over ~2e-5 (~250 here): 10, ten box widths, is far
+    # from both 0 and that value, so the check does not hang on this draw of the noise
     assert abs(_gauss_newton_step(J, r)[1]) > 10.0
     y = rng.standard_normal(400)
     y -= (y @ x) / (x @ x) * x                              # orthogonal to x: y's own singular vector
