@@ -218,10 +218,14 @@ def _add_calibrate_command(sub) -> None:
 def _add_diagnose_command(sub) -> None:
     """The ``diagnose`` sub-command: its arguments and handler."""
     dia = sub.add_parser("diagnose", help="residuals -> named cause -> extended model -> gain",
-                         description="Compare SCENARIO with a measured passage, screen and fit the catalogue of "
-                                     "model extensions (ballast_void, ballast_stiffness, rail_pad_stiffness, "
-                                     "impact_angle), name the cause (or none) and measure the gain. Writes "
-                                     "diagnosis.json, extended.yaml, report.md and plots into DIR.")
+                         description="Compare SCENARIO with a measured passage: fit the nuisance parameters first "
+                                     "(speed, time shift, vehicle, track damping, channel gains: reported apart, "
+                                     "never a track cause), then screen and fit the catalogue of track causes "
+                                     "(ballast_void, ballast_stiffness, rail_pad_stiffness, impact_angle; up to "
+                                     "two at once) and answer with named cause(s) and their gains and intervals, "
+                                     "'none' (the residual is at the noise level) or 'unexplained' (where the "
+                                     "residual lives). Writes diagnosis.json, extended.yaml, report.md and plots "
+                                     "into DIR.")
     dia.add_argument("scenario", metavar="SCENARIO", type=Path, help="nominal scenario YAML file")
     dia.add_argument("--measured", metavar="FILE", type=Path, required=True,
                      help="measured sensor data (.csv, .h5 or .mat; DESIGN.md section 4.3)")
