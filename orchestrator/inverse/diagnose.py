@@ -936,18 +936,23 @@ def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], 
     if ref_quiet:
         return Answer("none", [], f"the residual is at the noise level (J {ref.cmp.objective:.4g} <= "
                                   f"{1 + NONE_MARGIN:g} x the noise's {j_noise:.4g}, no channel above "
-                                  f"{LOUD_FACTOR:g} x its own noise level)", None)
+                                  f"{LOUD_FACTOR:g} x its own noise level, no displacement above "
+                                  f"{LOUD_FACTOR:g} x its group's median residual)", None)
     return Answer("unexplained", [], f"the residual is above the noise (J {ref.cmp.objective:.4g}, noise "
-                                     f"{j_noise:.4g}{_loud_words(loud)}) and no catalogue cause explains it: the "
+                                     f"{j_noise:.4g}{_loud_words(loud, inp.target.layout.types)}) and no "
+                                     f"catalogue cause explains it: the "
                                      f"best candidate {why}" + _step_words(step_err, j_noise), where)
 
 
-def _loud_words(loud: dict) -> str:
-    """The unexplained answer's note on the channels whose residual stands above their own noise level."""
+def _loud_words(loud: dict, types: dict) -> str:
+    """The unexplained answer's note on the channels whose residual stands above their own noise level (a
+    reconstructed displacement: above its group's median residual, :func:`orchestrator.inverse.significance.standing_out`)."""
     if not loud:
         return ""
     top = list(loud.items())[:3]
-    return "; channel(s) " + ", ".join(f"{k} at {v:.3g} x" for k, v in top) + " their own noise level"
+    return "; channel(s) " + ", ".join(
+        f"{k} at {v:.3g} x" + (" its group's median residual" if types.get(k) == "displacement" else "")
+        for k, v in top) + " their own noise level"
 
 
 def _step_words(step_err: dict | None, j_noise: float) -> str:
