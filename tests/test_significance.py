@@ -39,9 +39,12 @@ def test_step_error_is_the_nrmse_of_the_two_runs_difference_in_closed_form():
     assert abs(out["objective"] - (p + 3.0 * q) / 4.0) < 1e-12
 
 
-def _residual_target(residuals: dict, types: dict):
+def _residual_target(residuals: dict, types: dict, groups: dict | None = None):
+    """A comparison of these residuals and a target whose layout has these sensor types (and groups: one
+    group "A" by default)."""
     cmp = Comparison(0.0, {k: {"nrmse": 0.0} for k in residuals}, {}, 0.0, 0.0, 0, residuals, {})
-    return cmp, SimpleNamespace(layout=SimpleNamespace(types=types))
+    groups = groups if groups is not None else {k: "A" for k in residuals}
+    return cmp, SimpleNamespace(layout=SimpleNamespace(types=types, groups=groups))
 
 
 def test_a_channel_is_loud_only_when_its_residual_stands_above_its_own_first_difference_noise_level():
@@ -52,8 +55,9 @@ def test_a_channel_is_loud_only_when_its_residual_stands_above_its_own_first_dif
     differences are ~0 at the sampling interval, the level stays sigma, the RMS is ~sqrt(10^2 * 3/8 + 1) sigma
     (the mean square of a Hann bump of peak A over its support is 3 A^2 / 8) -> loud. A reconstructed
     displacement is not judged by its own differences, however loud (nor by its group's median alone in
-    its group: test_a_displacement_stands_out_only_above_three_times_its_groups_median). Tolerance: 4000 samples, the MAD-based level has a relative
-    sampling error ~2 %, far inside the margins checked (2.24 vs 3, 4.47 vs 3)."""
+    its group: test_a_displacement_stands_out_only_above_three_times_its_groups_median). Tolerance: 4000
+    samples, the MAD-based level has a relative sampling error ~2 %, far inside the margins checked (2.24 vs
+    3, 4.47 vs 3)."""
     from scipy.signal import lfilter
 
     from orchestrator.inverse.significance import LOUD_FACTOR, loud_channels
@@ -84,8 +88,9 @@ def test_a_displacement_stands_out_only_above_three_times_its_groups_median():
     RMS a / sqrt(2) exactly. Group B, amplitudes 1, 1, 1, 1, 5: median RMS 1 / sqrt(2), B5 at ratio 5 stands
     out (> LOUD_FACTOR 3). Group C, 1, 1, 2.5, 1: 2.5 does not. Group D has two displacement channels, fewer
     than MIN_PEERS: not judged, though one is 10 x the other. A pressure channel in group B (white noise, 100 x
-    the sines) is not a peer: not judged here, and quiet by its own differences. Through :func:`loud_channels` B5 vetoes ``none`` with the same ratio. Tolerance 1e-9:
-    round-off of a mean over 4000 samples of an exact identity."""
+    the sines) is not a peer: not judged here, and quiet by its own differences. Through
+    :func:`loud_channels` B5 vetoes ``none`` with the same ratio. Tolerance 1e-9: round-off of a mean over
+    4000 samples of an exact identity."""
     from orchestrator.inverse.significance import LOUD_FACTOR, MIN_PEERS, loud_channels, standing_out
 
     t = np.arange(4000) / 4000.0
@@ -93,14 +98,13 @@ def test_a_displacement_stands_out_only_above_three_times_its_groups_median():
     amps = {"B1": 1, "B2": 1, "B3": 1, "B4": 1, "B5": 5, "C1": 1, "C2": 1, "C3": 2.5, "C4": 1, "D1": 1, "D2": 10}
     res = {k: a * sine for k, a in amps.items()}
     res["P1"] = 100.0 * np.random.default_rng(14).normal(0.0, 1.0, t.size)   # white: its own level, ratio ~1
-    amps["P1"] = 100
-    types = {k: "pressure" if k == "P1" else "displacement" for k in amps}
-    cmp, target = _residual_target(res, types)
-    target.layout.groups = {k: "B" if k == "P1" else k[0] for k in amps}
+    types = {k: "pressure" if k == "P1" else "displacement" for k in res}
+    cmp, target = _residual_target(res, types, {k: "B" if k == "P1" else k[0] for k in res})
     assert MIN_PEERS > 2 and 2.5 < LOUD_FACTOR < 5                                          # the cases' premise
     out = standing_out(cmp, target)
     assert set(out) == {"B5"} and abs(out["B5"] - 5.0) < 1e-9, out
-    assert set(loud_channels(cmp, target)) == {"B5"}
+    loud = loud_channels(cmp, target)
+    assert set(loud) == {"B5"} and abs(loud["B5"] - 5.0) < 1e-9, loud
 
 
 def test_at_noise_level_says_no_when_one_channel_is_loud_though_the_objective_is_at_the_floor():

@@ -951,8 +951,8 @@ def _loud_words(loud: dict, types: dict) -> str:
         return ""
     top = list(loud.items())[:3]
     return "; channel(s) " + ", ".join(
-        f"{k} at {v:.3g} x" + (" its group's median residual" if types.get(k) == "displacement" else "")
-        for k, v in top) + " their own noise level"
+        f"{k} at {v:.3g} x " + ("its group's median residual" if types.get(k) == "displacement" else
+                                "its own noise level") for k, v in top)
 
 
 def _step_words(step_err: dict | None, j_noise: float) -> str:

@@ -477,9 +477,15 @@ def loudness(r: np.ndarray) -> float:
     """
     r = np.asarray(r, float)
     r = r[np.isfinite(r)]
-    level = noise_sigma(r)
-    rms = float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
+    level, rms = noise_sigma(r), _rms(r)
     return rms / level if level > 0 else (float("inf") if rms > 0 else 0.0)   # no level (NaN, 0): any misfit
+
+
+def _rms(r: np.ndarray) -> float:
+    """RMS of a residual's finite samples (0 when it has none)."""
+    r = np.asarray(r, float)
+    r = r[np.isfinite(r)]
+    return float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
 
 
 def loud_channels(cmp: Comparison, target) -> dict:
@@ -500,14 +506,10 @@ def standing_out(cmp: Comparison, target) -> dict:
     """Channel id -> its residual's RMS over the median of its group's reconstructed displacements', for the
     displacement channels above :data:`LOUD_FACTOR` (module doc); groups with fewer than :data:`MIN_PEERS`
     displacement channels are not judged."""
-    groups = getattr(target.layout, "groups", {})
     rms: dict[str, dict[str, float]] = {}
     for k, r in cmp.residuals.items():
-        if target.layout.types.get(k) != "displacement":
-            continue
-        r = np.asarray(r, float)
-        r = r[np.isfinite(r)]
-        rms.setdefault(groups.get(k), {})[k] = float(np.sqrt(np.mean(r ** 2))) if r.size else 0.0
+        if target.layout.types.get(k) == "displacement":
+            rms.setdefault(target.layout.groups[k], {})[k] = _rms(r)
     out = {}
     for members in rms.values():
         med = float(np.median(list(members.values())))
