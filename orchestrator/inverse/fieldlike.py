@@ -103,6 +103,7 @@ AA_SHARE = (0.35, 0.45)        # the acquisition's anti-alias corner / sampling 
                                # sigma-delta converter's pass-band edge)
 AA_ORDERS = (2, 4, 6, 8)       # its Butterworth order (run both ways: zero phase)
 KIND_FLOOR = 1.0               # a channel's noise scale is at least this share of its sensor kind's median std
+READS_NOTHING = 1e-9          # ... of those that read something: std above this x its kind's largest (not round-off)
 
 VEHICLE_MISMATCH = {           # vehicle kind -> (its parameter class, the parameters a case varies)
     "quarter": (QuarterParams, ("wheelset_mass", "k1", "c1")),
@@ -256,7 +257,8 @@ def disturbance(chain: Chain, index: int, n: int, dt: float, scale: float) -> np
 
 def noise_scales(sampled: dict, types: dict, chain: Chain) -> dict:
     """Channel id -> the scale of its disturbance (:func:`disturbance`): the channel's std, but at
-    least ``chain.kind_floor`` times the median std of the channels of its sensor type.
+    least ``chain.kind_floor`` times the median std of the channels of its sensor type that read
+    something (std above :data:`READS_NOTHING` times the kind's largest).
 
     Why a floor: sensors of one kind share an amplifier and a noise specification, so a quiet
     channel (a pressure cell under a sleeper that hardly loads it, a cell reading nothing)
@@ -264,6 +266,11 @@ def noise_scales(sampled: dict, types: dict, chain: Chain) -> dict:
     Scaling by each channel's own std alone made the quietest channels the cleanest: in the
     field matrix the transition bearer's pressure cell A6 (std ~2 kPa against 13-39 kPa
     for A1-A5) had 1/13 of the others' absolute noise, and a cell reading round-off none.
+    Why only the channels that read something: a cell reading nothing says nothing of its
+    amplifier's noise. Until 2026-11-29 (session 38) the median took them in, so under a sleeper
+    hanging over a void, where four or five of the six cells read nothing, the median and so the
+    floor were zero and those cells noise-free (void_sensor+mismatch 7606 and 7707 of issue 14's
+    field matrix: exact zeros, a signature of infinite ratio to the noise).
     """
     std = {sid: float(np.std(x)) for sid, x in sampled.items()}
     if chain.kind_floor <= 0.0:
@@ -271,7 +278,11 @@ def noise_scales(sampled: dict, types: dict, chain: Chain) -> dict:
     by_kind: dict = {}
     for sid, s in std.items():
         by_kind.setdefault(types[sid], []).append(s)
-    return {sid: max(s, chain.kind_floor * float(np.median(by_kind[types[sid]]))) for sid, s in std.items()}
+    level = {}
+    for kind, stds in by_kind.items():
+        reading = [s for s in stds if s > READS_NOTHING * max(stds)]
+        level[kind] = float(np.median(reading)) if reading else 0.0
+    return {sid: max(s, chain.kind_floor * level[types[sid]]) for sid, s in std.items()}
 
 
 def apply_chain(sampled: dict, types: dict, dt: float, highpass: float, chain: Chain) -> dict:
