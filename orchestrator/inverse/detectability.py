@@ -217,9 +217,10 @@ def signature(label: str, with_: dict, without: dict, noise: dict, t: np.ndarray
 
     A channel the effects leave exactly as it was has ratio 0; one they change where the
     noise is zero has ratio ``inf`` (a pressure cell under a void whose sleeper never
-    touches the ballast: its record is all zeros, and the chain's noise, a share of the
-    record's std, is zero too). With the times ``t`` also the ratio of the signature's
-    nuisance-free part (:func:`nuisance_free`).
+    touches the ballast, its record all zeros, in a passage written before the chain's
+    noise floor per sensor kind, or before that floor left out the cells reading nothing:
+    :func:`orchestrator.inverse.fieldlike.noise_scales`). With the times ``t`` also the
+    ratio of the signature's nuisance-free part (:func:`nuisance_free`).
     """
     d = {sid: with_[sid] - without[sid] for sid in with_}
     floor = {sid: float(np.sum(noise[sid] ** 2)) for sid in d}

@@ -270,7 +270,8 @@ def noise_scales(sampled: dict, types: dict, chain: Chain) -> dict:
     amplifier's noise. Until 2026-11-29 (session 38) the median took them in, so under a sleeper
     hanging over a void, where four or five of the six cells read nothing, the median and so the
     floor were zero and those cells noise-free (void_sensor+mismatch 7606 and 7707 of issue 14's
-    field matrix: exact zeros, a signature of infinite ratio to the noise).
+    field matrix: exact zeros, a signature of infinite ratio to the noise), and where two read
+    nothing it was low (two_void_pad 7101: 3.6 times below the median of the cells that read).
     """
     std = {sid: float(np.std(x)) for sid, x in sampled.items()}
     if chain.kind_floor <= 0.0:
