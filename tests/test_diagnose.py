@@ -991,12 +991,14 @@ def test_step_3c_releases_a_channel_gain_only_for_a_cause_that_explains_the_reco
 
 def test_round_2_also_screens_the_local_candidates_where_the_residual_left_by_the_first_cause_peaks():
     """Step 5 (diagnose module doc): round 2 adds to the superposed ranking's choice round 1's local candidates
-    at the sleeper nearest the residual's peak — not a named cause's site, not one already chosen — and none
-    when that residual is at the noise level. Built by hand, no runs: sleepers at 0, 1, ..., 4 m, the wheel at
-    x_start + V (t - shift) = 1.0 + 2.0 t; a residual loud on channel b (a Hann bump peaking at t = 0.5 s, so
-    at x = 2.0 m: sleeper 2). Named: a void at 2; chosen by the ranking: the pad at 3. Left: the pad at 2
-    (the void at 1 and the global bed are elsewhere / not local). With the bump removed the residual is white
-    noise at the channels' own sigma (J 1.0 against the noise's 1.0): nothing added."""
+    at the sleeper nearest the residual's peak and at the sleeper of its loudest channel — not a named cause's
+    site, not one already chosen — and none when that residual is at the noise level. Built by hand, no runs:
+    sleepers at 0, 1, ..., 4 m, the wheel at x_start + V (t - shift) = 1.0 + 2.0 t; a residual loud on
+    channel b (on sleeper 2; a Hann bump peaking at t = 0.5 s, so at x = 2.0 m: sleeper 2). Named: a void at
+    2; chosen by the ranking: the pad at 3. Left: the pad at 2 (the void at 1 and the global bed are
+    elsewhere / not local). The same bump on channel a instead (on sleeper 1): the peak's sleeper is still 2,
+    the loudest channel's 1, so the void at 1 joins. With the bump removed the residual is white noise at the
+    channels' own sigma (J 1.0 against the noise's 1.0): nothing added."""
     from types import SimpleNamespace
 
     from orchestrator.inputs.causes import Candidate
@@ -1023,4 +1025,7 @@ def test_round_2_also_screens_the_local_candidates_where_the_residual_left_by_th
 
     loud = {"a": noise["a"], "b": 20.0 * np.hanning(n) + noise["b"]}
     assert _at_the_residual(inp, target, cmp_of(loud), 2.0, named, chosen) == [Candidate("rail_pad_stiffness", 2)]
+    on_a = {"a": 20.0 * np.hanning(n) + noise["a"], "b": noise["b"]}
+    assert _at_the_residual(inp, target, cmp_of(on_a), 2.0, named, chosen) == [Candidate("ballast_void", 1),
+                                                                                Candidate("rail_pad_stiffness", 2)]
     assert _at_the_residual(inp, target, cmp_of(noise), 2.0, named, chosen) == []

@@ -102,7 +102,18 @@ module that applies it):
    misfit and was named (gain 84 % against 79 %). The residual's peak lay at 23. Costs one
    candidate's screening (and fit, when it ranks among the confirmed), only when a cause is named
    above the noise and the site is not already chosen: +1.1 % runs over the 119 passages of that
-   matrix (2026-11-29, benchmarks/RESULTS.md, session 35).
+   matrix (2026-11-29, benchmarks/RESULTS.md, session 35). **And at the sleeper of the residual's
+   loudest channel** (:func:`_loudest_sleeper`, since session 38): the time peak is where the wheel
+   is when the residual is largest, which a void beside the impact need not share. Measured on
+   field-like two_nose_void 8010 (nose 16.3 mrad, a void at 22 peaking 1.39 mm): the residual the
+   nose left peaked in time at 24, its loudest channel was B4 on sleeper 22 (62 times its noise
+   level); round 2 fitted voids at 20 and 23 (21 % and 17 % of the explainable misfit, not named)
+   and never 22; with the loudest channel's site the void at 22 removes 64 % and is named (gain
+   84.7 % against 71.8 %). Not enough for two_nose_void 7808 (its loudest channel B3 on 21, the void
+   at 21 screened removes nothing; the void is at 22). On the 76 passages of the 13-seed matrix
+   diagnosed again with it (every one that named two causes or left a residual above the noise, and
+   the ten whose first cause left J above 1.5 J_noise) that was the one answer that changed; +1.2 %
+   runs over the 221 (up to +30 % on one passage).
 5b. **Backfitting** (:func:`_backfit`): once a second cause is named, each named cause's
    parameters are fitted again (all of them, from their current values) on the model with
    the other at its latest values, first cause first — one pass of backfitting, so the
@@ -855,12 +866,25 @@ def _free(cands, named: list[_Named]) -> list[Candidate]:
 def _at_the_residual(inp: _Inputs, target: Target, cmp: Comparison, speed: float, named: list[_Named],
                      chosen: list[Candidate]) -> list[Candidate]:
     """Step 5: round 1's local candidates at the sleeper nearest the peak of the residual left by the named
-    cause(s) (``cmp``; :func:`orchestrator.inverse.significance.locate`), not yet ``chosen`` nor on a named
-    cause's site; none when that residual is at the noise level (module doc)."""
+    cause(s) (``cmp``; :func:`orchestrator.inverse.significance.locate`) and at the sleeper of its loudest
+    channel (:func:`_loudest_sleeper`), not yet ``chosen`` nor on a named cause's site; none when that
+    residual is at the noise level (module doc)."""
     if at_noise_level(cmp, target)[0]:
         return []
-    k = locate(cmp, target, inp.sensors, inp.sleeper_x, inp.x_start, speed)["sleeper_nearest_peak"]
-    return [c for c in _free(inp.cands, named) if c.sleeper == k and c not in chosen]
+    where = locate(cmp, target, inp.sensors, inp.sleeper_x, inp.x_start, speed)
+    sites = {where["sleeper_nearest_peak"], *_loudest_sleeper(where["channels"], inp.sensors)}
+    return [c for c in _free(inp.cands, named) if c.sleeper in sites and c not in chosen]
+
+
+def _loudest_sleeper(channels: list[dict], sensors) -> list[int]:
+    """The sleeper carrying the first channel of ``channels`` (``locate``'s: the channels above their noise
+    level, loudest first) that is on a sleeper; none when none is."""
+    body = {s.id: s.body for s in sensors}
+    for ch in channels:
+        b = body.get(ch["id"], "")
+        if b.startswith("sleeper_"):
+            return [int(b.split("_")[1])]
+    return []
 
 
 def _entry(e: Evaluated, rd: Round, rnd: int, ev: Evidence | None) -> CauseFit:
