@@ -213,6 +213,7 @@ from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFi
 from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, LOUD_FACTOR, MIN_SHARE, NONE_MARGIN, Evidence,
                                                assess, at_noise_level, bic_eff, channel_neff, deviance, locate,
                                                step_error)
+from track.sensors import sleeper_of
 
 SENSOR_REACH = 1     # local causes on the sleepers carrying sensors +- this many (an effect just beyond them)
 FAR_REACH = 3        # ... and +- this many when round 1 names nothing above the noise (step 3b)
@@ -241,19 +242,15 @@ def _parse_validate(texts) -> list[tuple[Path, float]]:
 
 def _sensor_sleepers(sensors) -> list[int]:
     """Indices of the sleepers carrying sensors, sorted."""
-    out = set()
-    for s in sensors:
-        if s.body.startswith("sleeper_"):
-            out.add(int(s.body.split("_")[1]))
-    return sorted(out)
+    return sorted({k for k in (sleeper_of(s.body) for s in sensors) if k is not None})
 
 
 def _where(cmp: Comparison, sensors) -> dict:
     """Where the simulation is wrong: groups, sleepers, time windows of the worst channels."""
     by_sleeper: dict[int, list[float]] = {}
     for s in sensors:
-        if s.id in cmp.channels and s.body.startswith("sleeper_"):
-            by_sleeper.setdefault(int(s.body.split("_")[1]), []).append(cmp.channels[s.id]["nrmse"])
+        if s.id in cmp.channels and sleeper_of(s.body) is not None:
+            by_sleeper.setdefault(sleeper_of(s.body), []).append(cmp.channels[s.id]["nrmse"])
     worst = sorted(cmp.channels, key=lambda k: -cmp.channels[k]["nrmse"])[:5]
     return {"groups": dict(sorted(cmp.groups.items(), key=lambda kv: -kv[1])),
             "sleepers": {str(k): float(np.mean(v)) for k, v in sorted(by_sleeper.items())},
@@ -879,12 +876,8 @@ def _at_the_residual(inp: _Inputs, target: Target, cmp: Comparison, speed: float
 def _loudest_sleeper(channels: list[dict], sensors) -> list[int]:
     """The sleeper carrying the first channel of ``channels`` (``locate``'s: the channels above their noise
     level, loudest first) that is on a sleeper; none when none is."""
-    body = {s.id: s.body for s in sensors}
-    for ch in channels:
-        b = body.get(ch["id"], "")
-        if b.startswith("sleeper_"):
-            return [int(b.split("_")[1])]
-    return []
+    on = {s.id: sleeper_of(s.body) for s in sensors}
+    return next(([on[ch["id"]]] for ch in channels if on.get(ch["id"]) is not None), [])
 
 
 def _entry(e: Evaluated, rd: Round, rnd: int, ev: Evidence | None) -> CauseFit:

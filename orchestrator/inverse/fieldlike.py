@@ -80,7 +80,7 @@ from orchestrator.inputs.measured import write_measured
 from orchestrator.inputs.sensor_layout import layout_of
 from orchestrator.inverse.synthetic import (TRIGGER_RANGE, Effect, acquisition_rate, acquisition_times,
                                             sample_signals, truth_run, variant_scenario)
-from track.sensors import ANTI_ALIAS_ORDER, ANTI_ALIAS_SHARE, displacement_from_acceleration
+from track.sensors import ANTI_ALIAS_ORDER, ANTI_ALIAS_SHARE, displacement_from_acceleration, sleeper_of
 from vehicle.bogie import BogieParams
 from vehicle.quarter import QuarterParams
 
@@ -103,7 +103,7 @@ AA_SHARE = (0.35, 0.45)        # the acquisition's anti-alias corner / sampling 
                                # sigma-delta converter's pass-band edge)
 AA_ORDERS = (2, 4, 6, 8)       # its Butterworth order (run both ways: zero phase)
 KIND_FLOOR = 1.0               # a channel's noise scale is at least this share of its sensor kind's median std
-READS_NOTHING = 1e-9          # ... of those that read something: std above this x its kind's largest (not round-off)
+READS_NOTHING = 1e-9           # ... of those that read something: std above this x its kind's largest (not round-off)
 
 VEHICLE_MISMATCH = {           # vehicle kind -> (its parameter class, the parameters a case varies)
     "quarter": (QuarterParams, ("wheelset_mass", "k1", "c1")),
@@ -481,7 +481,7 @@ def instrumented_sleepers(scenario) -> list[int]:
     from orchestrator.inputs.track_model import track_model
 
     sensors = resolve(layout_of(scenario), track_model(scenario.track))
-    return sorted({int(s.body.split("_")[1]) for s in sensors if s.body.startswith("sleeper_")})
+    return sorted({k for k in (sleeper_of(s.body) for s in sensors) if k is not None})
 
 
 def draw_case(seed: int, family: str, sleepers=None, channels=None, vehicle_kind: str | None = None) -> FieldCase:

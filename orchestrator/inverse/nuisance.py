@@ -151,6 +151,7 @@ from orchestrator.inverse.jackknife import group_half_width, group_jackknife, re
 from orchestrator.inverse.objective import Comparison, Target
 from orchestrator.inverse.screening import comparison
 from orchestrator.inverse.significance import LOUD_FACTOR, integrated_time, loudness
+from track.sensors import sleeper_of
 
 WARP_SPAN = 0.10       # speed ratios searched by the warp: 1 +- this (a speed log a few % off, with room)
 WARP_STEP = 0.0025     # grid of the warp's ratio (the parabola refines between nodes)
@@ -422,14 +423,12 @@ def widen_speed_for_step(nz: NuisanceFit, a: float, bias: float, step: float) ->
 # ------------------------------------------------------------------------------------ stage 2: sensor gains
 def neighbourhoods(sensors) -> dict:
     """Sensor id -> ids of its neighbours: the other sensors on its sleeper and the next ones, or on its rail."""
-    def sleeper(s):
-        return int(s.body.split("_")[1]) if s.body.startswith("sleeper_") else None
-
+    on = {s.id: sleeper_of(s.body) for s in sensors}
     out = {}
     for s in sensors:
-        k = sleeper(s)
+        k = on[s.id]
         out[s.id] = {o.id for o in sensors if o.id != s.id and (
-            (k is not None and sleeper(o) is not None and abs(sleeper(o) - k) <= 1)
+            (k is not None and on[o.id] is not None and abs(on[o.id] - k) <= 1)
             or (k is None and o.body == s.body))}
     return out
 

@@ -203,6 +203,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from orchestrator.inverse.objective import Comparison, noise_sigma, objective_from_channels
+from track.sensors import sleeper_of
 
 DELTA_BIC = 10.0      # "very strong" evidence (Kass & Raftery 1995), on the effective sample size
 MIN_SHARE = 0.25      # share of the explainable misfit a cause must remove (module doc, 2.)
@@ -595,8 +596,8 @@ def locate(cmp: Comparison, target, sensors, sleeper_x: np.ndarray, x_start: flo
     t_peak = float(t[int(np.argmax((R ** 2).sum(axis=0)))])
     x_of = (lambda tm: x_start + speed * (tm - cmp.shift))
     nearest = (lambda x: int(np.argmin(np.abs(sleeper_x - x))))
-    body = {s.id: s.body for s in sensors}
-    on_sleepers = sorted({int(body[k].split("_")[1]) for k in ids if body.get(k, "").startswith("sleeper_")})
+    on = {s.id: sleeper_of(s.body) for s in sensors}
+    on_sleepers = sorted({on[k] for k in ids if on.get(k) is not None})
     out = {"channels": [{"id": k, "nrmse_over_noise": v} for k, v in list(excess.items())[:8]],
            "time_window": window, "t_peak": t_peak,
            "wheel_position": [x_of(window[0]), x_of(window[1])],
@@ -611,10 +612,10 @@ def _edge(cmp: Comparison, target, sensors) -> str | None:
     """"below k" / "beyond k" when the misfit per instrumented sleeper is largest at an end of them."""
     by: dict[int, list[float]] = {}
     for s in sensors:
-        if s.id in cmp.channels and s.body.startswith("sleeper_"):
+        if s.id in cmp.channels and sleeper_of(s.body) is not None:
             sc = target.scale[s.id] if target.scale is not None else 1.0
             noise = target.sigma[s.id] / sc if sc > 0 else 1.0
-            by.setdefault(int(s.body.split("_")[1]), []).append(cmp.channels[s.id]["nrmse"] / max(noise, 1e-12))
+            by.setdefault(sleeper_of(s.body), []).append(cmp.channels[s.id]["nrmse"] / max(noise, 1e-12))
     if len(by) < 3:
         return None
     ks = sorted(by)

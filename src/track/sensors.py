@@ -101,6 +101,12 @@ class Sensor:
     gauge_length: float = GAUGE_LENGTH
 
 
+def sleeper_of(body: str) -> int | None:
+    """The index of the sleeper a body name ``sleeper_<index>`` (as :mod:`track.model` names them) is; None
+    for any other body (a rail, the solid crossing)."""
+    return int(body.split("_")[1]) if body.startswith("sleeper_") else None
+
+
 @dataclass
 class CompiledSensors:
     """Sensor rows on the generalized coordinates (see :func:`compile_sensors`).
@@ -386,5 +392,5 @@ def anti_alias(t: np.ndarray, x: np.ndarray, rate: float, share: float = ANTI_AL
     return sosfiltfilt(sos, x, axis=0, padlen=pad)
 
 
-__all__ = ["Sensor", "anti_alias", "ANTI_ALIAS_SHARE", "ANTI_ALIAS_ORDER", "SENSOR_TYPES", "CompiledSensors",
+__all__ = ["Sensor", "sleeper_of", "anti_alias", "ANTI_ALIAS_SHARE", "ANTI_ALIAS_ORDER", "SENSOR_TYPES", "CompiledSensors",
            "compile_sensors", "sensor_signals", "displacement_row", "solid_strain_row", "SOLID_DATUM", "pressure_weights", "displacement_from_acceleration"]
