@@ -991,13 +991,14 @@ def test_step_3c_releases_a_channel_gain_only_for_a_cause_that_explains_the_reco
 
 def test_round_2_also_screens_the_local_candidates_where_the_residual_left_by_the_first_cause_peaks():
     """Step 5 (diagnose module doc): round 2 adds to the superposed ranking's choice round 1's local candidates
-    at the sleeper nearest the residual's peak and at the sleeper of its loudest channel — not a named cause's
-    site, not one already chosen — and none when that residual is at the noise level. Built by hand, no runs:
-    sleepers at 0, 1, ..., 4 m, the wheel at x_start + V (t - shift) = 1.0 + 2.0 t; a residual loud on
-    channel b (on sleeper 2; a Hann bump peaking at t = 0.5 s, so at x = 2.0 m: sleeper 2). Named: a void at
-    2; chosen by the ranking: the pad at 3. Left: the pad at 2 (the void at 1 and the global bed are
-    elsewhere / not local). The same bump on channel a instead (on sleeper 1): the peak's sleeper is still 2,
-    the loudest channel's 1, so the void at 1 joins. With the bump removed the residual is white noise at the
+    at the sleeper nearest the residual's peak and at the sleeper of its loudest channel, and the global causes
+    — not a named cause's site, not one already chosen — and none when that residual is at the noise level.
+    Built by hand, no runs: sleepers at 0, 1, ..., 4 m, the wheel at x_start + V (t - shift) = 1.0 + 2.0 t; a
+    residual loud on channel b (on sleeper 2; a Hann bump peaking at t = 0.5 s, so at x = 2.0 m: sleeper 2).
+    Named: a void at 2; chosen by the ranking: the pad at 3 and the impact angle. Left: the pad at 2 and the
+    global bed (the void at 1 is elsewhere). The same bump on channel a instead (on sleeper 1): the peak's
+    sleeper is still 2, the loudest channel's 1, so the void at 1 joins. With the bed named instead of the void
+    at 2, the bed is left out and the void at 2 is in. With the bump removed the residual is white noise at the
     channels' own sigma (J 1.0 against the noise's 1.0): nothing added."""
     from types import SimpleNamespace
 
@@ -1013,19 +1014,22 @@ def test_round_2_also_screens_the_local_candidates_where_the_residual_left_by_th
     target = SimpleNamespace(layout=layout, scale={"a": 1.0, "b": 1.0}, sigma={"a": 1.0, "b": 1.0},
                              measured=SimpleNamespace(t=t, dt=dt))
     sensors = [SimpleNamespace(id="a", body="sleeper_1"), SimpleNamespace(id="b", body="sleeper_2")]
-    cands = [Candidate("ballast_void", 1), Candidate("ballast_void", 2), Candidate("rail_pad_stiffness", 2),
-             Candidate("rail_pad_stiffness", 3), Candidate("ballast_stiffness")]
-    inp = SimpleNamespace(target=target, sensors=sensors, sleeper_x=np.arange(5.0), x_start=1.0, cands=cands)
-    named = [SimpleNamespace(e=SimpleNamespace(candidate=Candidate("ballast_void", 2)))]
-    chosen = [Candidate("rail_pad_stiffness", 3)]
+    void1, void2, pad2, pad3 = (Candidate("ballast_void", 1), Candidate("ballast_void", 2),
+                                Candidate("rail_pad_stiffness", 2), Candidate("rail_pad_stiffness", 3))
+    bed, nose = Candidate("ballast_stiffness"), Candidate("impact_angle")
+    inp = SimpleNamespace(target=target, sensors=sensors, sleeper_x=np.arange(5.0), x_start=1.0,
+                          cands=[void1, void2, pad2, pad3, bed, nose])
+    named = [SimpleNamespace(e=SimpleNamespace(candidate=void2))]
+    chosen = [pad3, nose]
 
     def cmp_of(res):
         return Comparison(0.0, {k: {"nrmse": float(np.sqrt(np.mean(r ** 2)))} for k, r in res.items()}, {"A": 1.0},
                           1.0, 0.0, 2 * n, res, {})
 
     loud = {"a": noise["a"], "b": 20.0 * np.hanning(n) + noise["b"]}
-    assert _at_the_residual(inp, target, cmp_of(loud), 2.0, named, chosen) == [Candidate("rail_pad_stiffness", 2)]
+    assert _at_the_residual(inp, target, cmp_of(loud), 2.0, named, chosen) == [pad2, bed]
     on_a = {"a": 20.0 * np.hanning(n) + noise["a"], "b": noise["b"]}
-    assert _at_the_residual(inp, target, cmp_of(on_a), 2.0, named, chosen) == [Candidate("ballast_void", 1),
-                                                                                Candidate("rail_pad_stiffness", 2)]
+    assert _at_the_residual(inp, target, cmp_of(on_a), 2.0, named, chosen) == [void1, pad2, bed]
+    bed_named = [SimpleNamespace(e=SimpleNamespace(candidate=bed))]
+    assert _at_the_residual(inp, target, cmp_of(loud), 2.0, bed_named, chosen) == [void2, pad2]
     assert _at_the_residual(inp, target, cmp_of(noise), 2.0, named, chosen) == []
