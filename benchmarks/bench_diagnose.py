@@ -29,15 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from orchestrator.inputs.scenario import bundled_scenario, load_scenario
-from orchestrator.inputs.sensor_layout import layout_of, resolve
 from orchestrator.inverse.diagnose import diagnose
+from orchestrator.inverse.fieldlike import instrumented_sleepers
 from orchestrator.inverse.synthetic import HIDDEN_KINDS, hidden_effect, synthesize
-from track.model import build_track
-
-
-def _sensor_sleepers(sc) -> list[int]:
-    model = build_track(sc.track)
-    return sorted({int(s.body.split("_")[1]) for s in resolve(layout_of(sc), model) if s.body.startswith("sleeper_")})
 
 
 def _label(kind: str, effect) -> str:
@@ -53,7 +47,7 @@ def _named_label(named: dict) -> str:
 def part_time(workers: int) -> str:
     path = bundled_scenario("crossing_1_12_through_120.yaml")
     sc = load_scenario(path)
-    effect = hidden_effect(7, "ballast_void", _sensor_sleepers(sc))
+    effect = hidden_effect(7, "ballast_void", instrumented_sleepers(sc))
     with tempfile.TemporaryDirectory() as tmp:
         synthesize(sc, effect, Path(tmp) / "passage.csv", seed=7)
         t0 = time.perf_counter()
@@ -70,7 +64,7 @@ def confusion_rows(seeds: int, workers: int) -> list[tuple]:
     """(true label, named label, sleeper right, gain) of ``seeds`` hidden effects per kind."""
     path = bundled_scenario("measurement/crossing_quarter_120.yaml")
     sc = load_scenario(path)
-    sleepers = _sensor_sleepers(sc)
+    sleepers = instrumented_sleepers(sc)
     kinds = ("none",) + HIDDEN_KINDS
     rows = []
     for kind in kinds:

@@ -7,7 +7,8 @@ from orchestrator.inputs.scenario import bundled_scenario, load_scenario
 from orchestrator.inputs.sensor_layout import layout_from_dict, load_layout, resolve
 from track.model import build_track
 from track.post import sleeper_pressure
-from track.sensors import Sensor, compile_sensors, displacement_from_acceleration, sensor_signals, sleeper_of
+from track.sensors import (Sensor, compile_sensors, displacement_from_acceleration, sensor_signals, sleeper_of,
+                           sleepers_of)
 from track.statics import static_equilibrium
 
 
@@ -82,6 +83,8 @@ def test_default_layout_resolves_on_the_crossing(turnout):
     assert e1.body == "crossing" and e1.coord == pytest.approx(x_t + 0.15, abs=1e-12)
     # the sleeper a sensor sits on, read back from its body's name (the reference point's index, not parsed)
     assert sleeper_of(b["B1"].body) == k_t - 2 and sleeper_of(a[0].body) == k_t and sleeper_of(e1.body) is None
+    # the layout places its sleeper sensors at T-2 .. T+2 (scenarios/sensors/in2track_like.yaml)
+    assert sleepers_of(sensors) == list(range(k_t - 2, k_t + 3))
     # seat:crossing is the crossing rail's seat on that sleeper
     ys = [y for s, r, y in zip(model.pads.sleeper, model.pads.rail, model.pads.y) if s == k_t and r == "crossing"]
     assert b["B3"].coord == pytest.approx(np.mean(ys), abs=1e-12)

@@ -120,10 +120,10 @@ module that applies it):
    (a void at 21, a worn nose) the void was named first, and the impact angle, which screened on the
    void's model removes 38 % of the explainable misfit (31.7 % of J), was never among the four
    superposition ranked. There are at most three, so they cost little; they are screened whenever the
-   residual is above the noise, as the sites above are. With them 8414 names both (gain 99.2 %, the
-   nose 31.7 % of J on the void's model); the 76 passages of the 13-seed matrix that reach round 2
-   above the noise (as for the loudest channel's site) diagnosed again: no answer or gain moved, +1.1 %
-   runs on them; out of sample, the 34 passages of two seeds drawn after it (8515, 8616): 34/34 right.
+   residual is above the noise, as the sites above are. With them 8414 names both (gain 99.2 %); the
+   76 passages of the 13-seed matrix that reach round 2 above the noise (as for the loudest channel's
+   site) diagnosed again: no answer or gain moved, +1.1 % runs on them; out of sample, the 34 passages
+   of two seeds drawn after it (8515, 8616): 34/34 right.
 5b. **Backfitting** (:func:`_backfit`): once a second cause is named, each named cause's
    parameters are fitted again (all of them, from their current values) on the model with
    the other at its latest values, first cause first — one pass of backfitting, so the
@@ -223,7 +223,7 @@ from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFi
 from orchestrator.inverse.significance import (CV_TOL, DELTA_BIC, LOUD_FACTOR, MIN_SHARE, NONE_MARGIN, Evidence,
                                                assess, at_noise_level, bic_eff, channel_neff, deviance, locate,
                                                step_error)
-from track.sensors import sleeper_of
+from track.sensors import sleeper_of, sleepers_of
 
 SENSOR_REACH = 1     # local causes on the sleepers carrying sensors +- this many (an effect just beyond them)
 FAR_REACH = 3        # ... and +- this many when round 1 names nothing above the noise (step 3b)
@@ -250,17 +250,12 @@ def _parse_validate(texts) -> list[tuple[Path, float]]:
     return out
 
 
-def _sensor_sleepers(sensors) -> list[int]:
-    """Indices of the sleepers carrying sensors, sorted."""
-    return sorted({k for k in (sleeper_of(s.body) for s in sensors) if k is not None})
-
-
 def _where(cmp: Comparison, sensors) -> dict:
     """Where the simulation is wrong: groups, sleepers, time windows of the worst channels."""
     by_sleeper: dict[int, list[float]] = {}
     for s in sensors:
-        if s.id in cmp.channels and sleeper_of(s.body) is not None:
-            by_sleeper.setdefault(sleeper_of(s.body), []).append(cmp.channels[s.id]["nrmse"])
+        if s.id in cmp.channels and (k := sleeper_of(s.body)) is not None:
+            by_sleeper.setdefault(k, []).append(cmp.channels[s.id]["nrmse"])
     worst = sorted(cmp.channels, key=lambda k: -cmp.channels[k]["nrmse"])[:5]
     return {"groups": dict(sorted(cmp.groups.items(), key=lambda kv: -kv[1])),
             "sleepers": {str(k): float(np.mean(v)) for k, v in sorted(by_sleeper.items())},
@@ -341,7 +336,7 @@ def _read_inputs(scenario_path, measured_path, out_dir, validate) -> _Inputs:
                              f"({scenario.simulation.output_step:g} s) must be at most half the sampling interval "
                              f"(simulation.output_step <= {0.5 / target.measured.rate:.3g} s)")
     val_targets = [(Target.read(p, layout), p, v) for p, v in validations]
-    cands = candidates(_sensor_sleepers(sensors), len(model.layout.sleepers), SENSOR_REACH)
+    cands = candidates(sleepers_of(sensors), len(model.layout.sleepers), SENSOR_REACH)
     sleeper_x = np.array([s.x for s in model.layout.sleepers], float)
     x_start = start_position(scenario, model.layout)
     return _Inputs(scenario_path, measured_path, out_dir, scenario, layout, sensors, target, val_targets, cands,
@@ -816,7 +811,7 @@ def _further(inp: _Inputs, ref: Evaluated) -> list[Candidate]:
     if at_noise_level(ref.cmp, inp.target)[0]:
         return []
     have = set(inp.cands)
-    return [c for c in candidates(_sensor_sleepers(inp.sensors), len(inp.sleeper_x), FAR_REACH) if c not in have]
+    return [c for c in candidates(sleepers_of(inp.sensors), len(inp.sleeper_x), FAR_REACH) if c not in have]
 
 
 def _backfit(pool: Pool, target: Target, ref_raw: dict, ref: Evaluated, named: list[_Named]) -> None:

@@ -80,7 +80,7 @@ from orchestrator.inputs.measured import write_measured
 from orchestrator.inputs.sensor_layout import layout_of
 from orchestrator.inverse.synthetic import (TRIGGER_RANGE, Effect, acquisition_rate, acquisition_times,
                                             sample_signals, truth_run, variant_scenario)
-from track.sensors import ANTI_ALIAS_ORDER, ANTI_ALIAS_SHARE, displacement_from_acceleration, sleeper_of
+from track.sensors import ANTI_ALIAS_ORDER, ANTI_ALIAS_SHARE, displacement_from_acceleration, sleepers_of
 from vehicle.bogie import BogieParams
 from vehicle.quarter import QuarterParams
 
@@ -481,7 +481,7 @@ def instrumented_sleepers(scenario) -> list[int]:
     from orchestrator.inputs.track_model import track_model
 
     sensors = resolve(layout_of(scenario), track_model(scenario.track))
-    return sorted({k for k in (sleeper_of(s.body) for s in sensors) if k is not None})
+    return sleepers_of(sensors)
 
 
 def draw_case(seed: int, family: str, sleepers=None, channels=None, vehicle_kind: str | None = None) -> FieldCase:

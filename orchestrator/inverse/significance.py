@@ -612,10 +612,10 @@ def _edge(cmp: Comparison, target, sensors) -> str | None:
     """"below k" / "beyond k" when the misfit per instrumented sleeper is largest at an end of them."""
     by: dict[int, list[float]] = {}
     for s in sensors:
-        if s.id in cmp.channels and sleeper_of(s.body) is not None:
+        if s.id in cmp.channels and (k := sleeper_of(s.body)) is not None:
             sc = target.scale[s.id] if target.scale is not None else 1.0
             noise = target.sigma[s.id] / sc if sc > 0 else 1.0
-            by.setdefault(sleeper_of(s.body), []).append(cmp.channels[s.id]["nrmse"] / max(noise, 1e-12))
+            by.setdefault(k, []).append(cmp.channels[s.id]["nrmse"] / max(noise, 1e-12))
     if len(by) < 3:
         return None
     ks = sorted(by)

@@ -107,6 +107,11 @@ def sleeper_of(body: str) -> int | None:
     return int(body.split("_")[1]) if body.startswith("sleeper_") else None
 
 
+def sleepers_of(sensors) -> list[int]:
+    """The indices of the sleepers carrying any of ``sensors`` (:func:`sleeper_of` of their bodies), sorted."""
+    return sorted({k for k in (sleeper_of(s.body) for s in sensors) if k is not None})
+
+
 @dataclass
 class CompiledSensors:
     """Sensor rows on the generalized coordinates (see :func:`compile_sensors`).
@@ -392,5 +397,5 @@ def anti_alias(t: np.ndarray, x: np.ndarray, rate: float, share: float = ANTI_AL
     return sosfiltfilt(sos, x, axis=0, padlen=pad)
 
 
-__all__ = ["Sensor", "sleeper_of", "anti_alias", "ANTI_ALIAS_SHARE", "ANTI_ALIAS_ORDER", "SENSOR_TYPES", "CompiledSensors",
+__all__ = ["Sensor", "sleeper_of", "sleepers_of", "anti_alias", "ANTI_ALIAS_SHARE", "ANTI_ALIAS_ORDER", "SENSOR_TYPES", "CompiledSensors",
            "compile_sensors", "sensor_signals", "displacement_row", "solid_strain_row", "SOLID_DATUM", "pressure_weights", "displacement_from_acceleration"]
