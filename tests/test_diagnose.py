@@ -109,8 +109,8 @@ def test_faster_passage_with_vehicle_mismatch_is_never_a_track_cause(tmp_path):
     """Issue 14's null with a vehicle mismatch and its traceback case at once: no track effect, another
     vehicle, a passage 3 % faster whose record reaches past the nominal run. The answer is ``none`` or
     ``unexplained`` (never a track cause) and, if ``unexplained``, says where (channels, a time window inside
-    the record, a frequency band); some samples lay outside the simulated window and were masked, not a
-    traceback."""
+    the record, a frequency band), if ``none``, what the record resolves (a limit per screened void site); some
+    samples lay outside the simulated window and were masked, not a traceback."""
     case, passage = _field_passage(tmp_path, "null_fast")
     result = diagnose(SCENARIO, passage, tmp_path / "out", progress=False).to_json()
     a = result["answer"]
@@ -128,7 +128,13 @@ def test_faster_passage_with_vehicle_mismatch_is_never_a_track_cause(tmp_path):
         w = a["where"]
         assert w["channels"] and measured.t[0] <= w["time_window"][0] < w["time_window"][1] <= measured.t[-1], w
         assert 0 <= w["band_hz"][0] < w["band_hz"][1], w
-    assert (tmp_path / "out" / "report.md").read_text(encoding="utf-8").startswith("# Diagnosis")
+    report = (tmp_path / "out" / "report.md").read_text(encoding="utf-8")
+    assert report.startswith("# Diagnosis")
+    if a["kind"] == "none":   # what the record resolves: every screened void site, a limit within its grid
+        voids = {r["sleeper"]: r for r in a["resolution"] if r["cause"] == "ballast_void" and r["proxy"] == "uniform"}
+        assert sorted(voids) == list(range(18, 25)), voids
+        assert all(r["limit"] is None or 0 < r["limit"] <= r["screened_to"] for r in voids.values()), voids
+        assert "were not screened" in a["reason"] and "## What this record resolves" in report
 
 
 def _named_right(named: dict, effect: dict) -> bool:
@@ -385,7 +391,11 @@ def test_diagnosis_round_trips_through_json():
     assert list(data) == ["scenario", "measured", "answer", "baseline", "nuisance", "causes", "named_cause",
                           "extended_scenario", "gain", "validation", "dropped", "runs", "wall_seconds", "settings",
                           "runs_ahead"]
-    assert list(data["answer"]) == ["kind", "causes", "reason", "where"]
+    assert list(data["answer"]) == ["kind", "causes", "reason", "where", "resolution"]
+    limits = [{"cause": "ballast_void", "sleeper": 21, "proxy": "uniform", "nominal": 0.0, "limit": 3e-5,
+               "screened_to": 3.5e-3, "unit": "m"}]
+    quiet = Answer("none", [], "the residual is at the noise level", None, limits)
+    assert Answer.from_json(json.loads(json.dumps(quiet.to_json()))) == quiet
     assert list(data["named_cause"]) == ["cause", "sleeper", "parameters", "objective", "gain", "evidence",
                                          "ambiguity", "uncertainty"]
     assert list(data["causes"][1]) == ["cause", "parameters", "objective", "gain", "evidence"]

@@ -77,53 +77,33 @@ module that applies it):
    the extended model's, fit best (no runs) are screened for real on top of the
    extended model and the :data:`SECOND_CONFIRM` best of them fitted, and a second
    cause is named by the same rule relative to it (at most :data:`MAX_CAUSES`), each
-   with its own gain. The first cause stays at its round-1 values. Two effects that
-   interact strongly are missed this way (measured, two_void_pad 7101: a void at 21
-   beside a pad 0.16x at 20): fitted alone, the void takes a shape that also stands in
-   for the pad (J 0.34; the truth's shape 0.23), on which the true pad *raises* J (on
-   the hanging uniform void of the former fit it removed 8 % of the explainable misfit),
-   and the pad's round-1 screening (on the nominal model) superposed on the void model
-   ranks it 7th of 9, not among those screened again; with the truth's void the pad
-   removes 94 % of J. Re-fitting the first cause with each second *candidate* (stepwise
-   regression's refit) would address that, at ~70 runs per void refit: not done. (In
-   that passage two pressure cells of the hanging sleeper read nothing and the kind's noise
-   floor, a median that counted them, was 3.6 times too low on the three quietest; written
-   again with the floor of the cells that read something (session 38,
-   :func:`orchestrator.inverse.fieldlike.noise_scales`) the void removes 96 % of J, round 2
-   reaches the pad at 20 and names it. The mechanism stands; that case no longer shows it.)
-   **And the candidates where the residual lives** (:func:`_at_the_residual`): when the residual
-   left by the named cause is above the noise, round 1's local candidates at the sleeper nearest
-   its peak (:func:`orchestrator.inverse.significance.locate`, on the extended model after step 4b)
-   are screened too. Superposition is first order; an effect under the impact interacts with the
-   first cause: on field-like two_nose_void 7505 (nose 18.8 mrad, a void at 23 hanging 2.25 mm at
-   its far end) the void's round-1 increments, superposed on the worn-nose model, changed J by
-   under 0.3 % for every candidate (0.1213-0.1222 against 0.1222), so void@23 ranked 7th and was
-   never run, while screened and fitted for real on that model it removed 37 % of the explainable
-   misfit and was named (gain 84 % against 79 %). The residual's peak lay at 23. Costs one
-   candidate's screening (and fit, when it ranks among the confirmed), only when a cause is named
-   above the noise and the site is not already chosen: +1.1 % runs over the 119 passages of that
-   matrix (2026-11-29, benchmarks/RESULTS.md, session 35). **And at the sleeper of the residual's
-   loudest channel** (:func:`_loudest_sleeper`, since session 38): the time peak is where the wheel
-   is when the residual is largest, which a void beside the impact need not share. Measured on
-   field-like two_nose_void 8010 (nose 16.3 mrad, a void at 22 peaking 1.39 mm): the residual the
-   nose left peaked in time at 24, its loudest channel was B4 on sleeper 22 (62 times its noise
-   level); round 2 fitted voids at 20 and 23 (21 % and 17 % of the explainable misfit, not named)
-   and never 22; with the loudest channel's site the void at 22 removes 64 % and is named (gain
-   84.7 % against 71.8 %). Not enough for two_nose_void 7808 (its loudest channel B3 on 21, the void
-   at 21 screened removes nothing; the void is at 22). On the 76 passages of the 13-seed matrix
-   diagnosed again with it (every one that named two causes or left a residual above the noise, and
-   the ten whose first cause left J above 1.5 J_noise) that was the one answer that changed; +1.2 %
-   runs over the 221 (up to +30 % on one passage). **And the global causes not yet taken** (since
-   session 39): a global cause (the nose's impact angle, the bed's or every pad's stiffness) changes
-   every channel, so it has no site where the residual lives, and its round-1 screening, made on a
-   model without the first cause, superposes badly on one with it: on field-like two_nose_void 8414
-   (a void at 21, a worn nose) the void was named first, and the impact angle, which screened on the
-   void's model removes 38 % of the explainable misfit (31.7 % of J), was never among the four
-   superposition ranked. There are at most three, so they cost little; they are screened whenever the
-   residual is above the noise, as the sites above are. With them 8414 names both (gain 99.2 %); the
-   76 passages of the 13-seed matrix that reach round 2 above the noise (as for the loudest channel's
-   site) diagnosed again: no answer or gain moved, +1.1 % runs on them; out of sample, the 34 passages
-   of two seeds drawn after it (8515, 8616): 34/34 right.
+   with its own gain. The first cause stays at its round-1 values. Superposing round 1's
+   screening is first order, so when the residual the first cause leaves is above the noise,
+   round 2 also screens (:func:`_at_the_residual`), each only when not already chosen:
+
+   * the local candidates at the sleeper nearest the residual's peak in time
+     (:func:`orchestrator.inverse.significance.locate`, on the extended model after step 4b;
+     since session 35): an effect under the impact interacts with the first cause (two_nose_void
+     7505: a void at 23 ranked 7th by superposition, named when run on the worn-nose model);
+   * the local candidates at the sleeper of the residual's loudest channel
+     (:func:`_loudest_sleeper`; session 38): the wheel's place at the peak need not be the
+     effect's (two_nose_void 8010: the peak at 24, the void at 22 under channel B4);
+   * the global causes no named cause has taken (the impact angle, the bed's and every pad's
+     stiffness; session 39): they change every channel, so they have no site where the residual
+     lives, and their round-1 screening superposes badly on a model with the first cause
+     (two_nose_void 8414: the nose removed 38 % of the explainable misfit on the void's model and
+     was never among the four superposition ranked).
+
+   Each was measured on issue 14's field-like matrix before it landed: answers it changed,
+   runs it cost (+1.1 to +1.2 % each), out-of-sample seeds after it (benchmarks/RESULTS.md,
+   sessions 35, 38 and 39). Known limit: two effects that interact strongly are missed when
+   the first cause, fitted alone, takes a shape that stands in for the second (measured on
+   two_void_pad 7101, a void beside a soft pad: the pad then *raised* J on the void's model; that
+   case is named since session 38's noise floor, the mechanism stands); refitting the
+   first cause with each second candidate (stepwise regression's refit, ~70 runs a void) would
+   address it and is not done. two_nose_void 7808 (a void at 22 beside a worn nose, its loudest
+   channel on 21) is still missed; screening every free local candidate in round 2 named a void
+   at 20 there at +55 % runs, not landed (session 39).
 5b. **Backfitting** (:func:`_backfit`): once a second cause is named, each named cause's
    parameters are fitted again (all of them, from their current values) on the model with
    the other at its latest values, first cause first — one pass of backfitting, so the
@@ -177,7 +157,9 @@ module that applies it):
 6. **Answer** (:func:`_answer`): ``named`` (with each cause's 90 % intervals,
    identifiability and which sensors would pin it:
    :mod:`orchestrator.inverse.uncertainty`); else ``none`` when the residual is at the
-   noise level; else ``unexplained`` with where it lives (channels, time window, the
+   noise level, with what the record resolves: per candidate of round 1, the least effect that would
+   have lifted the residual above the noise, from round 1's screening runs (no runs;
+   :mod:`orchestrator.inverse.resolution`); else ``unexplained`` with where it lives (channels, time window, the
    sleeper nearest the wheel then, frequency band:
    :func:`orchestrator.inverse.significance.locate`).
 7. **Extended model and gain.** The named causes are added to the scenario
@@ -217,6 +199,7 @@ from orchestrator.inverse.diagnosis import Answer, Baseline, CauseFit, Diagnosis
 from orchestrator.inverse.jsonable import numpy_default
 from orchestrator.inverse.nuisance import NuisanceFit, widen_speed_for_step
 from orchestrator.inverse.objective import Comparison, Target
+from orchestrator.inverse.resolution import resolution, summary
 from orchestrator.inverse.screening import Evaluated, Pool, checked_comparison
 from orchestrator.inverse.selection import (CONFIRM, FINE_MAX_NFEV, FIT, CauseFitter, Round, cause_stages, rejudged,
                                              select, side_by_side, superposed_ranking, widen)
@@ -940,13 +923,14 @@ def _named_entry(n: _Named, rnd: int, reach: tuple[int, int]) -> CauseFit:
 
 
 def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], final: Comparison,
-            best: Evidence | None, step_err: dict | None = None) -> Answer:
+            best: Evidence | None, step_err: dict | None = None, first: Round | None = None) -> Answer:
     """Step 6: named, ``none`` or ``unexplained`` (module doc), with where the residual lives when above noise.
 
     ``ref``/``ref_raw``: the model the causes were added to (nominal, or with the nuisance
     estimates); ``final``: the comparison of the model with all named causes; ``best``: the
     evidence of round 1's best candidate (why nothing was named); ``step_err``: the model's
-    own time-step error (:func:`_step_error`), reported where the residual lives.
+    own time-step error (:func:`_step_error`), reported where the residual lives; ``first``: round 1, whose
+    screening runs say what a ``none`` answer's record resolves (:func:`orchestrator.inverse.resolution.resolution`).
     """
     quiet, j_noise, _ = at_noise_level(final, inp.target)
     where = None if quiet else locate(final, inp.target, inp.sensors, inp.sleeper_x,
@@ -961,10 +945,13 @@ def _answer(inp: _Inputs, ref: Evaluated, ref_raw: dict, named: list[CauseFit], 
     why = "; ".join(best.reasons) if best is not None else "no candidate could be evaluated"
     ref_quiet, _, loud = at_noise_level(ref.cmp, inp.target)
     if ref_quiet:
+        limits = resolution(inp.target, first.reference.cmp, first.proxies) if first is not None else None
+        words = summary(limits) if limits else ""
         return Answer("none", [], f"the residual is at the noise level (J {ref.cmp.objective:.4g} <= "
                                   f"{1 + NONE_MARGIN:g} x the noise's {j_noise:.4g}, no channel above "
                                   f"{LOUD_FACTOR:g} x its own noise level, no displacement above "
-                                  f"{LOUD_FACTOR:g} x its group's median residual)", None)
+                                  f"{LOUD_FACTOR:g} x its group's median residual)" + (f"; {words}" if words else ""),
+                      None, limits)
     return Answer("unexplained", [], f"the residual is above the noise (J {ref.cmp.objective:.4g}, noise "
                                      f"{j_noise:.4g}{_loud_words(loud, inp.target.layout.types)}) and no "
                                      f"catalogue cause explains it: the "
@@ -1085,7 +1072,7 @@ def _result(inp: _Inputs, base: Evaluated, ref: Evaluated, ref_raw: dict, named_
     """
     first = rounds[0]
     best_ev = evidence.get((1, first.real[0].candidate)) if first.real else None
-    answer = _answer(inp, ref, ref_raw, named_entries, final, best_ev, step_err)
+    answer = _answer(inp, ref, ref_raw, named_entries, final, best_ev, step_err, first)
     causes = [_entry(e, rd, i + 1, evidence.get((i + 1, e.candidate))) for i, rd in enumerate(rounds)
               for e in rd.ranked]
     legacy = _legacy_named(answer, base, best_ev, first.real[0].candidate.label if first.real else None)

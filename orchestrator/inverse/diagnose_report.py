@@ -2,8 +2,8 @@
 
 It reads the typed result, :class:`orchestrator.inverse.diagnosis.Diagnosis`, and leads
 with the verdict and its evidence in plain words (:func:`_verdict_lines`), then the
-residual before/after per channel, the nuisance estimates, the named causes' intervals,
-the candidates, the validation passages and the variants left out.
+residual before/after per channel, the nuisance estimates, the named causes' intervals (or,
+for a ``none`` answer, what the record resolves), the candidates, the validation passages and the variants left out.
 
 The plots are the report's slowest part (~0.5 s each, 3.5 s for the default layout's seven,
 after the runs, with every worker idle): given the diagnosis's executor, :func:`write_report`
@@ -127,7 +127,7 @@ def write_report(out_dir: Path, result: Diagnosis, target, before, after, layout
     figures = _figures(target, before, after, layout)
     _draw_all(out_dir, figures, executor)
     lines = (_verdict_lines(result) + _baseline_lines(result, before, after) + _nuisance_lines(result)
-             + _interval_lines(result) + _cause_lines(result) + _dropped_lines(result))
+             + _interval_lines(result) + _resolution_lines(result) + _cause_lines(result) + _dropped_lines(result))
     if result.validation:
         lines += ["## Validation at other speeds", "", "| file | speed [m/s] | J before | J after | gain |",
                   "|---|---|---|---|---|"]
@@ -250,6 +250,47 @@ def _interval_lines(result: Diagnosis) -> list[str]:
         if u["pin_with"]:
             lines.append(f"\n{_label(c)}: to pin what the data leave open, add {'; '.join(u['pin_with'])}.\n")
     return lines + [""]
+
+
+def _resolution_lines(result: Diagnosis) -> list[str]:
+    """A ``none`` answer's tables of what the record resolves (:mod:`orchestrator.inverse.resolution`): per
+    candidate the least effect that would not have passed for noise, voids by shape, the others either side."""
+    limits = result.answer.resolution
+    if not limits:
+        return []
+    by: dict[tuple, dict] = {}
+    for r in limits:
+        by.setdefault((r["cause"], r["sleeper"]), {})[r["proxy"]] = r
+    lines = ["## What this record resolves", "",
+             "The least effect that would have lifted the residual above the noise level, per candidate screened "
+             "(`>`: not within the farthest magnitude screened). First order, on this record's noise: an upper "
+             "bound of what can hide in it; smaller effects may still be named. Sleepers not listed were not "
+             "screened.", ""]
+    voids = {k: v for k, v in by.items() if k[0] == "ballast_void"}
+    if voids:
+        shapes = list(dict.fromkeys(p for v in voids.values() for p in v))
+        lines += ["| void under sleeper: peak gap [mm] | " + " | ".join(shapes) + " |", "|---|" + "---|" * len(shapes)]
+        lines += [f"| {k[1]} | " + " | ".join(_limit_cell(v.get(p)) for p in shapes) + " |" for k, v in voids.items()]
+        lines.append("")
+    rest = {k: v for k, v in by.items() if k[0] != "ballast_void"}
+    if rest:
+        lines += ["| cause | sleeper | nominal | at or below | at or above |", "|---|---|---|---|---|"]
+        for (cause, sleeper), v in rest.items():
+            side = {("softer", "lower"): "below", ("stiffer", "higher"): "above"}
+            cells = {w: _limit_cell(next((r for p, r in v.items() if p in ps), None)) for ps, w in side.items()}
+            unit = next(iter(v.values()))
+            lines.append(f"| {cause} | {'' if sleeper is None else sleeper} | "
+                         f"{_limit_cell(dict(unit, limit=unit['nominal']))} | {cells['below']} | {cells['above']} |")
+        lines.append("")
+    return lines
+
+
+def _limit_cell(r: dict | None) -> str:
+    """One limit in the report's units (mm for m, mrad for rad, with the unit for an angle)."""
+    if r is None:
+        return ""
+    f, unit = {"m": (1e3, ""), "rad": (1e3, " mrad")}.get(r["unit"], (1.0, ""))
+    return f"{f * r['limit']:.3g}{unit}" if r["limit"] is not None else f"> {f * r['screened_to']:.3g}{unit}"
 
 
 def _dropped_lines(result: Diagnosis) -> list[str]:

@@ -152,22 +152,28 @@ class Answer:
     where : dict or None
         For ``unexplained`` (and for the rest of the misfit after named causes, when it is
         above the noise): :func:`orchestrator.inverse.significance.locate`.
+    resolution : list of dict or None
+        For ``none``: what the record resolves, per screened candidate and screening proxy the least
+        effect that would have lifted the residual above the noise
+        (:func:`orchestrator.inverse.resolution.resolution`).
     """
 
     kind: str
     causes: list
     reason: str
     where: dict | None = None
+    resolution: list | None = None
 
     def to_json(self) -> dict:
-        """``{"kind", "causes", "reason", "where"}``."""
+        """``{"kind", "causes", "reason", "where", "resolution"}``."""
         return {"kind": self.kind, "causes": [c.to_json() for c in self.causes], "reason": self.reason,
-                "where": self.where}
+                "where": self.where, "resolution": self.resolution}
 
     @classmethod
     def from_json(cls, data: dict) -> Answer:
-        """The answer of :meth:`to_json`'s dict."""
-        return cls(data["kind"], [CauseFit.from_json(c) for c in data["causes"]], data["reason"], data.get("where"))
+        """The answer of :meth:`to_json`'s dict (``resolution`` absent before 2026-11-30: None)."""
+        return cls(data["kind"], [CauseFit.from_json(c) for c in data["causes"]], data["reason"], data.get("where"),
+                   data.get("resolution"))
 
     @classmethod
     def of_named_cause(cls, named: dict) -> Answer:

@@ -90,11 +90,11 @@ def noise_sigma(x: np.ndarray) -> float:
 
 def objective_from_channels(nrmse: dict, groups: dict, weights: dict) -> tuple[float, dict]:
     """J and the per-group mean nRMSE from channel nRMSEs (module docstring)."""
-    J, gmean = _group_weighted(nrmse, groups, weights)
+    J, gmean = group_weighted(nrmse, groups, weights)
     return float(J), {g: float(v) for g, v in gmean.items()}
 
 
-def _group_weighted(nrmse: dict, groups: dict, weights: dict) -> tuple:
+def group_weighted(nrmse: dict, groups: dict, weights: dict) -> tuple:
     """(J, group -> mean nRMSE) of channel nRMSEs that are numbers or equal-length arrays (one entry per
     simulation: :func:`objective_rows`), elementwise."""
     by_group: dict[str, list] = {}
@@ -260,7 +260,7 @@ def objective_rows(measured, rows: np.ndarray, ids: list, sizes: np.ndarray, gro
     once: channel ``ids[i]`` in columns ``sizes[i]:sizes[i+1]``), to rank them.
 
     Per channel the nRMSE over its valid samples, then the group means and weights of
-    :func:`objective_from_channels` (:func:`_group_weighted`), over whole arrays (equal to :func:`score`'s J to round-off). A row whose channel has
+    :func:`objective_from_channels` (:func:`group_weighted`), over whole arrays (equal to :func:`score`'s J to round-off). A row whose channel has
     fewer than 2 valid samples gets NaN.
     """
     gains = gains or {}
@@ -276,7 +276,7 @@ def objective_rows(measured, rows: np.ndarray, ids: list, sizes: np.ndarray, gro
             rmse = np.sqrt(np.where(ok, r * r, 0.0).sum(axis=1) / n)
         nr[k] = rmse / sc if sc > 0 else np.full(rows.shape[0], np.inf)
         bad |= n < 2
-    out = np.array(_group_weighted(nr, groups, weights)[0], float)
+    out = np.array(group_weighted(nr, groups, weights)[0], float)
     out[bad] = np.nan
     return out
 

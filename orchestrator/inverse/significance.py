@@ -260,25 +260,30 @@ def channel_neff(cmp: Comparison) -> dict:
 
 
 # ------------------------------------------------------------------------------------ objectives
-def _noise_nrmse(target, cmp: Comparison) -> dict:
+def normaliser(target, k: str) -> float:
+    """The normaliser of channel ``k``'s nRMSE: the target's scale, else the measured channel's std."""
+    return target.scale[k] if target.scale is not None else float(np.nanstd(target.measured.channels[k]))
+
+
+def noise_nrmse(target, cmp: Comparison) -> dict:
     """Channel id -> the measured noise's nRMSE, sigma over the channel's normaliser."""
     nrmse = {}
     for k in cmp.channels:
-        sc = target.scale[k] if target.scale is not None else float(np.nanstd(target.measured.channels[k]))
+        sc = normaliser(target, k)
         nrmse[k] = target.sigma[k] / sc if sc > 0 else 0.0
     return nrmse
 
 
 def noise_objective(target, cmp: Comparison) -> float:
     """J that the measured noise alone would give: each channel's nRMSE = sigma / its normaliser."""
-    return objective_from_channels(_noise_nrmse(target, cmp), target.layout.groups, target.layout.weights)[0]
+    return objective_from_channels(noise_nrmse(target, cmp), target.layout.groups, target.layout.weights)[0]
 
 
 def floor_objective(target, cmp: Comparison) -> float:
     """J of the floor no cause can lower (module doc, 2.): per channel the noise's nRMSE and the model's own
     time-step error (``target.floor``, against the converged model) added in quadrature — independent errors;
     :func:`noise_objective` when the target has no step floor."""
-    nrmse = {k: math.hypot(v, target.floor.get(k, 0.0)) for k, v in _noise_nrmse(target, cmp).items()}
+    nrmse = {k: math.hypot(v, target.floor.get(k, 0.0)) for k, v in noise_nrmse(target, cmp).items()}
     return objective_from_channels(nrmse, target.layout.groups, target.layout.weights)[0]
 
 
