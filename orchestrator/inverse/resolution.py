@@ -53,7 +53,10 @@ What the limit is, and is not:
   median, :func:`orchestrator.inverse.significance.standing_out`) is not used: without it a
   limit can only be larger.
 * A void's limit is its proxy's *peak* gap; a void of another shape with the same peak moves
-  the sleeper less than the uniform gap does.
+  the sleeper less than the uniform gap does. Across shapes the support removed (the mean of the
+  six gaps) compares better than the peak: issue 14's off-sensor voids at sleeper 17, one-sided
+  and concentrated at the sleeper's end, exceed the linear wedge's peak limit but not its mean
+  gap, and were answered ``none`` (benchmarks/RESULTS.md, session 40).
 * Only the screened candidates: the sleepers carrying sensors and
   :data:`orchestrator.inverse.diagnose.SENSOR_REACH` beyond them (further when step 3b looked
   further). Of a sleeper outside them the record says nothing here.
