@@ -35,7 +35,9 @@ is read from first differences, which coloured noise and drift pass less than wh
 real record's residual is larger than sigma_c and the limit errs large: on six field-like nulls
 (other vehicle, speed, damping, time step, the field chain), a uniform void of the stated limit
 hidden in the same truth was named at its sleeper in 18/18 (sleepers 19, 21, 24), one of half the
-limit was shown in 15/18, of a quarter in 3/18 (``benchmarks/bench_resolution.py``).
+limit was shown in 15/18, of a quarter in 3/18; a softer pad at its limit was shown in 12/12
+(sleepers 20, 21), at half of it (on the log axis) in 3/12 (``benchmarks/bench_resolution.py``).
+The void errs more because the naming rule names a void before the residual leaves the margin.
 
 The **limit** is the magnitude nearest x0 at which one of the two first holds; ``None`` when
 neither does up to the farthest screened magnitude (the record does not resolve that
