@@ -293,6 +293,11 @@ def nuisance_coverage(rows: list[dict]) -> tuple[int, int, list[str]]:
 
 
 # ------------------------------------------------------------------------------------------ running
+def case_setup(sc) -> tuple:
+    """(instrumented sleepers, channel ids) of the scenario, as :func:`run_case` draws its cases with them."""
+    return instrumented_sleepers(sc), tuple(layout_of(sc).ids)
+
+
 def run_case(sc, setup: tuple, family: str, seed: int, workers: int, folder: Path, stage: str = "all") -> dict | None:
     """Draw, synthesize and diagnose one case; its row (truth, answer, score, gain, wall).
 
@@ -356,7 +361,7 @@ def read_rows(out: Path) -> list[dict]:
 def run_all(families, seeds: int, workers: int, out: Path, stage: str = "all") -> list[dict]:
     """Every family x seed, rows appended to ``out/rows.jsonl`` as they finish."""
     sc = load_scenario(SCENARIO)
-    setup = (instrumented_sleepers(sc), tuple(layout_of(sc).ids))
+    setup = case_setup(sc)
     out.mkdir(parents=True, exist_ok=True)
     # a case already diagnosed in this folder is not run again (resumable; --seeds 3 after --seeds 1 adds two)
     done = {(r["family"], r["seed"]) for r in (read_rows(out) if stage != "synth" else [])}

@@ -39,15 +39,14 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from bench_diagnose_field import SCENARIO, case_seed, read_answer
+from bench_diagnose_field import SCENARIO, case_seed, case_setup, read_answer
+from orchestrator.inputs.causes import N_GAPS
 from orchestrator.inputs.scenario import load_scenario
 from orchestrator.inverse.diagnose import diagnose
-from orchestrator.inverse.fieldlike import FieldCase, draw_case, instrumented_sleepers, synthesize_case
+from orchestrator.inverse.fieldlike import FieldCase, draw_case, synthesize_case
 from orchestrator.inverse.synthetic import Effect
-from orchestrator.inputs.sensor_layout import layout_of
 
-N_GAPS = 6   # a uniform void: the same gap at the sleeper's six points (DESIGN.md §4.2)
-# what ``--hide`` hides at k x the stated limit L: (cause, proxy of the limit, the effect's parameters, its
+# What ``--hide`` hides at k x the stated limit L: (cause, proxy of the limit, the effect's parameters, its
 # magnitude's words); a void's gap scales with k, a stiffness factor on its log axis (L ** k: k = 1 is L, the
 # axis the limit was found on, as the screening interpolates it)
 HIDDEN = {
@@ -87,7 +86,7 @@ def run(families, seeds: int, sleepers, factors, workers: int, out: Path, hide: 
                                                                                                      list[str]]:
     """Every (null passage, sleeper, factor): its row; and the null passages left out (not ``none``)."""
     sc = load_scenario(SCENARIO)
-    setup = (instrumented_sleepers(sc), tuple(layout_of(sc).ids))
+    setup = case_setup(sc)
     rows, skipped = [], []
     for family in families:
         for i in range(seeds):
@@ -109,7 +108,7 @@ def run(families, seeds: int, sleepers, factors, workers: int, out: Path, hide: 
                     continue
                 for k in factors:
                     hidden = replace(case, effects=(Effect(cause, s, parameters(limit, k)),))
-                    sub = folder / f"{'void' if hide == 'void' else hide + '_'}{s}_x{k:g}"
+                    sub = folder / f"{hide}_{s}_x{k:g}"
                     if not (sub / "passage.csv").is_file():
                         sub.mkdir(parents=True, exist_ok=True)
                         synthesize_case(sc, hidden, sub / "passage.csv")

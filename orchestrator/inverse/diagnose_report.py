@@ -276,21 +276,26 @@ def _resolution_lines(result: Diagnosis) -> list[str]:
     if rest:
         lines += ["| cause | sleeper | nominal | at or below | at or above |", "|---|---|---|---|---|"]
         for (cause, sleeper), v in rest.items():
-            side = {("softer", "lower"): "below", ("stiffer", "higher"): "above"}
-            cells = {w: _limit_cell(next((r for p, r in v.items() if p in ps), None)) for ps, w in side.items()}
-            unit = next(iter(v.values()))
+            below = next((r for p, r in v.items() if p in ("softer", "lower")), None)
+            above = next((r for p, r in v.items() if p in ("stiffer", "higher")), None)
+            any_ = below or above
             lines.append(f"| {cause} | {'' if sleeper is None else sleeper} | "
-                         f"{_limit_cell(dict(unit, limit=unit['nominal']))} | {cells['below']} | {cells['above']} |")
+                         f"{_in_units(any_['nominal'], any_['unit'])} | {_limit_cell(below)} | {_limit_cell(above)} |")
         lines.append("")
     return lines
 
 
+def _in_units(value: float, unit: str) -> str:
+    """A magnitude in the report's units: mm for m, mrad (named) for rad, others as they are."""
+    f, name = {"m": (1e3, ""), "rad": (1e3, " mrad")}.get(unit, (1.0, ""))
+    return f"{f * value:.3g}{name}"
+
+
 def _limit_cell(r: dict | None) -> str:
-    """One limit in the report's units (mm for m, mrad for rad, with the unit for an angle)."""
+    """One limit (:func:`_in_units`), ``> end`` where not resolved within the screened range."""
     if r is None:
         return ""
-    f, unit = {"m": (1e3, ""), "rad": (1e3, " mrad")}.get(r["unit"], (1.0, ""))
-    return f"{f * r['limit']:.3g}{unit}" if r["limit"] is not None else f"> {f * r['screened_to']:.3g}{unit}"
+    return _in_units(r["limit"], r["unit"]) if r["limit"] is not None else "> " + _in_units(r["screened_to"], r["unit"])
 
 
 def _dropped_lines(result: Diagnosis) -> list[str]:

@@ -100,32 +100,33 @@ def _moments(base: dict, a: dict, b: dict, ids: list) -> np.ndarray:
     return out
 
 
-def _rule(ms: np.ndarray, ids: list, target, level: np.ndarray, threshold: float) -> np.ndarray:
+def _rule(ms: np.ndarray, target, ch: tuple, threshold: float) -> np.ndarray:
     """The rule's ratio (>= 1: the residual would be above the noise) at each row of ``ms`` (points, channels: the
-    signature's mean square), each channel's noise level ``level``."""
-    scale = np.array([normaliser(target, k) for k in ids])
-    inv = np.divide(1.0, scale, out=np.zeros_like(scale), where=scale > 0)
+    signature's mean square); ``ch``: the channels' (ids, noise levels, 1 / normalisers, judged loud or not)."""
+    ids, level, inv, judged = ch
     rms = np.sqrt(level ** 2 + ms)
     J, _ = group_weighted({k: rms[:, j] * inv[j] for j, k in enumerate(ids)}, target.layout.groups,
                           target.layout.weights)
-    judged = np.array([target.layout.types.get(k) != "displacement" and level[j] > 0 for j, k in enumerate(ids)])
     loud = (rms[:, judged] / level[judged]).max(axis=1) / LOUD_FACTOR if judged.any() else np.zeros(ms.shape[0])
     return np.maximum(np.asarray(J, float) / threshold, loud)
 
 
-def _limit(kind, xs: list, grid: dict, x0: float, ids: list, target, level: np.ndarray, threshold: float) -> float | None:
+def _limit(kind, xs: list, grid: dict, x0: float, target, ch: tuple, threshold: float) -> float | None:
     """Along the magnitudes ``xs`` (outward from ``x0``), the first magnitude at which the rule holds, or None."""
+    ids = ch[0]
     sig0 = {k: np.asarray(grid[x0][k], float) for k in ids}
     u = (lambda x: np.log(x)) if kind.log else (lambda x: x)
     t = np.linspace(0.0, 1.0, STEPS + 1)
     for xa, xb in zip([x0] + xs[:-1], xs):
         m = _moments(sig0, grid[xa], grid[xb], ids)
         ms = np.outer((1 - t) ** 2, m[0]) + np.outer(2 * t * (1 - t), m[1]) + np.outer(t ** 2, m[2])
-        r = _rule(ms, ids, target, level, threshold)
+        r = _rule(ms, target, ch, threshold)
         hit = np.flatnonzero(r >= 1.0)
         if hit.size:
-            i = int(hit[0])
-            ti = t[i] if i == 0 else t[i - 1] + (1.0 - r[i - 1]) / (r[i] - r[i - 1]) * (t[i] - t[i - 1])
+            i = int(hit[0])   # >= 1: at x0 the ratio is the noise's own, 1 / (1 + NONE_MARGIN) and 1 / LOUD_FACTOR
+            #                   (J_noise > 0 unless no channel has noise), and each later interval starts where the
+            #                   one before ended below 1
+            ti = t[i - 1] + (1.0 - r[i - 1]) / (r[i] - r[i - 1]) * (t[i] - t[i - 1])
             v = u(xa) + ti * (u(xb) - u(xa))
             return float(np.exp(v) if kind.log else v)
     return None
@@ -152,22 +153,24 @@ def resolution(target, ref: Comparison, proxies: dict) -> list[dict]:
         have been above the noise, ``None`` when not within ``screened_to``.
     """
     ids = list(ref.channels)
-    threshold = (1.0 + NONE_MARGIN) * noise_objective(target, ref)
     level = np.array([float(target.sigma[k]) for k in ids])   # the noise level the diagnosis reads
+    scale = np.array([normaliser(target, k) for k in ids])
+    inv = np.divide(1.0, scale, out=np.zeros_like(scale), where=scale > 0)
+    judged = np.array([target.layout.types.get(k) != "displacement" for k in ids]) & (level > 0)
+    ch = (ids, level, inv, judged)
+    threshold = (1.0 + NONE_MARGIN) * noise_objective(target, ref)
     out = []
     for c in sorted(proxies, key=lambda c: (c.cause, -1 if c.sleeper is None else c.sleeper)):
         kind = kind_of(c)
         axes_c, screened_c = proxies[c]
-        for (profile, _, x0), grid in zip(axes_c, screened_c):
-            if x0 not in grid:
-                continue
+        for (profile, _, x0), grid in zip(axes_c, screened_c):   # the reference's signals at x0 (selection._screen)
             for side in ("below", "above"):
                 xs = sorted((x for x in grid if (x < x0 if side == "below" else x > x0)),
                             key=lambda x: abs(x - x0))
                 if not xs:
                     continue
                 out.append({"cause": c.cause, "sleeper": c.sleeper, "proxy": _direction(kind, profile, side),
-                            "nominal": float(x0), "limit": _limit(kind, xs, grid, x0, ids, target, level, threshold),
+                            "nominal": float(x0), "limit": _limit(kind, xs, grid, x0, target, ch, threshold),
                             "screened_to": float(xs[-1]), "unit": kind.unit})
     return out
 

@@ -475,7 +475,7 @@ def step_error(coarse: Comparison, fine: Comparison, target) -> dict:
     for k in coarse.channels:
         d = target.gains.get(k, 1.0) * (coarse.simulated[k] - fine.simulated[k])
         ok = np.isfinite(d)
-        sc = target.scale[k] if target.scale is not None else float(np.nanstd(target.measured.channels[k]))
+        sc = normaliser(target, k)
         nrmse[k] = float(np.sqrt(np.mean(d[ok] ** 2))) / sc if ok.any() and sc > 0 else 0.0
     j, groups = objective_from_channels(nrmse, lay.groups, lay.weights)
     return {"objective": j, "groups": groups, "channels": nrmse}
@@ -551,9 +551,9 @@ def _share_band(x: np.ndarray, w: np.ndarray, share: float = WINDOW_SHARE) -> li
 def _excess_channels(cmp: Comparison, target) -> dict:
     """Channel id -> nRMSE / noise nRMSE, for the channels above (1 + NONE_MARGIN) x their noise level."""
     out = {}
+    noise_of = noise_nrmse(target, cmp)
     for k, v in cmp.channels.items():
-        sc = target.scale[k] if target.scale is not None else 1.0
-        noise = target.sigma[k] / sc if sc > 0 else 0.0
+        noise = noise_of[k]
         ratio = v["nrmse"] / noise if noise > 0 else float("inf")
         if ratio > 1.0 + NONE_MARGIN:
             out[k] = float(ratio)
@@ -564,7 +564,7 @@ def _normalised_residuals(cmp: Comparison, target, ids) -> np.ndarray:
     """(channels, samples): residuals over their channel's normaliser, NaN as 0."""
     rows = []
     for k in ids:
-        sc = target.scale[k] if target.scale is not None else 1.0
+        sc = normaliser(target, k)
         rows.append(np.nan_to_num(cmp.residuals[k] / (sc if sc > 0 else 1.0)))
     return np.array(rows)
 
@@ -616,11 +616,10 @@ def locate(cmp: Comparison, target, sensors, sleeper_x: np.ndarray, x_start: flo
 def _edge(cmp: Comparison, target, sensors) -> str | None:
     """"below k" / "beyond k" when the misfit per instrumented sleeper is largest at an end of them."""
     by: dict[int, list[float]] = {}
+    noise = noise_nrmse(target, cmp)
     for s in sensors:
         if s.id in cmp.channels and (k := sleeper_of(s.body)) is not None:
-            sc = target.scale[s.id] if target.scale is not None else 1.0
-            noise = target.sigma[s.id] / sc if sc > 0 else 1.0
-            by.setdefault(k, []).append(cmp.channels[s.id]["nrmse"] / max(noise, 1e-12))
+            by.setdefault(k, []).append(cmp.channels[s.id]["nrmse"] / max(noise[s.id], 1e-12))
     if len(by) < 3:
         return None
     ks = sorted(by)
